@@ -1,0 +1,25 @@
+"""rayreach: reactive motion planning for industrial arms with PPO and virtual laser rays.
+
+Importing the package registers the Gymnasium environments listed in ``ENV_IDS``::
+
+    import gymnasium as gym
+    import rayreach
+
+    env = gym.make("rayreach/Reach-UR5-v0", scenario="exp1")
+"""
+
+from __future__ import annotations
+
+from gymnasium.envs.registration import register, registry
+
+__version__ = "0.1.0"
+
+ENV_IDS: list[str] = []
+for _robot in ("UR5", "KR16"):
+    _id = f"rayreach/Reach-{_robot}-v0"
+    if _id not in registry:
+        # no max_episode_steps: the env truncates itself at its step budget, with the paper's -5
+        register(id=_id, entry_point="rayreach.env:ReachEnv", kwargs={"robot": _robot.lower()})
+    ENV_IDS.append(_id)
+
+__all__ = ["ENV_IDS", "__version__"]

@@ -1,0 +1,292 @@
+"""The Gymnasium environment of the paper: reach a goal, seeing obstacles only through 129 rays.
+
+## Action space
+
+``Box(-1, 1, (6,), float32)``: an end-effector pose step in the world frame. ``a[0:3]`` times
+``ee_step`` (0.005 m) is the translation; ``a[3:6]`` times ``rot_step`` (0.005 rad) is a
+rotation about the world x, y and z axes (roll, pitch, yaw increments), applied to the
+current tool orientation. The stepped pose becomes joint angles through damped-least-squares
+IK (paper Algorithm 1); the robot moves to them at once (a kinematic arm, as in the paper).
+A NaN or infinite action raises ``ValueError`` and changes nothing.
+
+## Observation space
+
+``Box(142,) float32``, in this order:
+
+=======  ====================================================================
+0-5      joint angles, rad
+6-8      goal position minus end-effector position, m (world frame)
+9-11     end-effector orientation as roll, pitch, yaw of R_ref^T R, rad, where
+         R_ref is the tool orientation at the episode start: zero at the start
+         and continuous, unlike raw Euler angles of a tool pointing down,
+         whose roll jumps between +pi and -pi
+12       distance from end effector to goal, m
+13-141   the 129 ray hit fractions in [0, 1] (order: ``rayreach.sensors``)
+=======  ====================================================================
+
+## Rewards (paper eq. "total reward"), episode end
+
+success +10 when the distance is below ``goal_tolerance`` (the episode ends at the last goal;
+earlier goals of a sequence switch to the next one), collision -10 (ends), distance
+-0.01 d, leaving the workspace -10 (ends), step budget ``max_steps`` used up -5 (truncated),
+shaking -0.005 n_s. ``info`` carries every term (``reward_terms``), ``distance``,
+``is_success``, ``collision``, ``out_of_bounds``, ``ee_position`` and ``goal``.
+
+## Time
+
+Each step is one control period (``control_period``, default 1/240 s, PyBullet's default
+step); moving obstacles advance by that much per step.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, fields, replace
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from rayreach import rewards as R
+from rayreach.kinematics import IKParams, Kinematics
+from rayreach.robots import RobotSpec, get_robot
+from rayreach.scenarios import RANDOM, Scenario, ScenarioError, get_scenario
+from rayreach.scenarios.feasibility import solve_start, validate
+from rayreach.scenarios.random_world import RandomWorldConfig, RandomWorlds
+from rayreach.scene import Scene
+from rayreach.sensors import N_RAYS, RAY_RANGE, RayModel
+from rayreach.transforms import matrix_to_rpy, rotvec_to_matrix
+
+N_ROBOT_OBS = 13
+OBS_SIZE = N_ROBOT_OBS + N_RAYS
+
+
+@dataclass(frozen=True)
+class EnvConfig:
+    """Everything that shapes an episode; the paper's values are the defaults."""
+
+    goal_tolerance: float = 0.01
+    """Success radius, m (the paper's final target size; the training curriculum changes it)."""
+    max_steps: int = 1024
+    """Step budget per episode."""
+    control_period: float = 1.0 / 240.0
+    """Simulated seconds per step (moving obstacles advance this much)."""
+    ray_backend: str = "auto"
+    """``auto`` (numpy when every obstacle is a primitive), ``numpy`` or ``bullet``."""
+    ray_range: float = RAY_RANGE
+    ik: IKParams = IKParams(tolerance=1e-4, max_iterations=10)
+    """IK per step: 0.1 mm is ample for a 5 mm step; an unconverged step still moves (see info)."""
+    rewards: R.RewardWeights = R.RewardWeights()
+    random_world: RandomWorldConfig = field(default_factory=RandomWorldConfig)
+
+    def __post_init__(self) -> None:
+        if not self.goal_tolerance > 0:
+            raise ValueError(f"goal_tolerance must be positive, got {self.goal_tolerance}")
+        if self.max_steps < 1:
+            raise ValueError(f"max_steps must be >= 1, got {self.max_steps}")
+        if not self.control_period > 0:
+            raise ValueError(f"control_period must be positive, got {self.control_period}")
+
+
+def make_config(config: EnvConfig | None, overrides: dict[str, Any]) -> EnvConfig:
+    """``config`` with keyword overrides; unknown keys name the valid ones."""
+    base = config or EnvConfig()
+    valid = {f.name for f in fields(EnvConfig)}
+    unknown = sorted(set(overrides) - valid)
+    if unknown:
+        raise TypeError(f"unknown environment option(s) {unknown}; valid: {', '.join(sorted(valid))}")
+    return replace(base, **overrides)
+
+
+class ReachEnv(gym.Env):
+    """Reach one goal (or a sequence) with a UR5 or KR16; see the module docstring."""
+
+    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 30}
+
+    def __init__(
+        self,
+        robot: str | RobotSpec | None = None,
+        scenario: str | Path | Scenario = RANDOM,
+        render_mode: str | None = None,
+        config: EnvConfig | None = None,
+        **overrides: Any,
+    ) -> None:
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"unknown render_mode '{render_mode}'; valid: {self.metadata['render_modes']}")
+        self.config = make_config(config, overrides)
+        self.render_mode = render_mode
+        self.random = isinstance(scenario, str) and scenario == RANDOM
+        fixed = None if self.random else get_scenario(scenario)
+        if robot is None:
+            if fixed is None:
+                raise ValueError("a random-world environment needs a robot (ur5 or kr16)")
+            robot = fixed.robot
+        self.spec_robot = get_robot(robot)
+        if fixed is not None and fixed.robot != self.spec_robot.name:
+            raise ScenarioError(f"scenario '{fixed.name}' is for robot '{fixed.robot}', not '{self.spec_robot.name}'")
+        base_pos = fixed.base_position if fixed else None
+        base_rpy = fixed.base_rpy if fixed else None
+        self.kin = Kinematics(self.spec_robot, base_pos, base_rpy)
+        self.scene = Scene(self.spec_robot, base_pos, base_rpy, gui=render_mode == "human")
+        self.rays = RayModel(self.spec_robot, self.config.ray_range)
+        self.worlds = RandomWorlds(self.kin, self.scene, self.config.random_world) if self.random else None
+        self.n_obstacles = self.config.random_world.n_obstacles
+
+        self.action_space = gym.spaces.Box(-1.0, 1.0, (6,), dtype=np.float32)
+        low = np.full(OBS_SIZE, -np.inf, dtype=np.float32)
+        high = np.full(OBS_SIZE, np.inf, dtype=np.float32)
+        low[N_ROBOT_OBS:], high[N_ROBOT_OBS:] = 0.0, 1.0
+        self.observation_space = gym.spaces.Box(low, high, dtype=np.float32)
+        self._step_scale = np.array([self.spec_robot.ee_step] * 3 + [self.spec_robot.rot_step] * 3)
+
+        self.scenario: Scenario | None = None
+        self._fixed_start: np.ndarray | None = None
+        if fixed is not None:
+            self._load_fixed(fixed)
+        self._shake = R.ShakeCounter()
+        self._ready = False
+
+    # ------------------------------------------------------------------ setup
+    def _load_fixed(self, scenario: Scenario) -> None:
+        q_start = solve_start(scenario, self.kin)
+        self.scene.set_obstacles(scenario.obstacles)
+        validate(scenario, self.kin, self.scene, q_start)
+        self.scenario = scenario
+        self._fixed_start = q_start
+        self.caster = self.scene.caster(self.config.ray_backend)
+        self.scene.set_goal_markers(scenario.goals)
+
+    def set_goal_tolerance(self, tolerance: float) -> None:
+        """Change the success radius (used by the goal-size curriculum between episodes)."""
+        self.config = make_config(self.config, {"goal_tolerance": float(tolerance)})
+
+    def set_n_obstacles(self, n: int) -> None:
+        """Obstacles per random world from the next reset on (obstacle curriculum)."""
+        if n < 0:
+            raise ValueError(f"n_obstacles must be >= 0, got {n}")
+        self.n_obstacles = int(n)
+
+    # ------------------------------------------------------------------ gym API
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        super().reset(seed=seed)
+        if self.random:
+            assert self.worlds is not None
+            scenario, q_start = self.worlds.sample(self.np_random, self.n_obstacles)
+            self.scenario = scenario
+            self.caster = self.scene.caster(self.config.ray_backend)
+            self.scene.set_goal_markers(scenario.goals)
+        else:
+            assert self._fixed_start is not None
+            q_start = self._fixed_start
+        self.scene.set_time(0.0)
+        self.q = np.array(q_start, dtype=float)
+        self.scene.set_joints(self.q)
+        self.frames = self.kin.frames(self.q)
+        ee = self.kin.ee_from_frames(self.frames)
+        self.ee_pos, self.ee_rot = ee[:3, 3].copy(), ee[:3, :3].copy()
+        self.ref_rot_t = self.ee_rot.T.copy()
+        self.goal_index = 0
+        self.goals = np.asarray(self.scenario.goals, dtype=float)  # type: ignore[union-attr]
+        self.steps = 0
+        self.time = 0.0
+        self._shake.reset()
+        self._ready = True
+        distance = float(np.linalg.norm(self.goals[0] - self.ee_pos))
+        info = {"distance": distance, "ee_position": self.ee_pos.copy(), "goal": self.goals[0].copy(),
+                "is_success": False}
+        return self._observation(distance), info
+
+    def step(self, action: np.ndarray):
+        if not self._ready:
+            raise RuntimeError("call reset() before step() (and after an episode ends)")
+        a = np.asarray(action, dtype=float).reshape(-1)
+        if a.shape != (6,):
+            raise ValueError(f"action must have 6 values (dx, dy, dz, droll, dpitch, dyaw), got shape {np.shape(action)}")
+        if not np.all(np.isfinite(a)):
+            raise ValueError(f"action contains NaN or infinity: {a.tolist()}; the scene is unchanged")
+        delta = np.clip(a, -1.0, 1.0) * self._step_scale
+        cfg = self.config
+
+        target_pos = self.ee_pos + delta[:3]
+        target_rot = rotvec_to_matrix(delta[3:]) @ self.ee_rot
+        ik = self.kin.ik(target_pos, target_rot, self.q, cfg.ik, start_frames=self.frames)
+        self.q, self.frames = ik.q, ik.frames
+        ee = self.kin.ee_from_frames(self.frames)
+        self.ee_pos, self.ee_rot = ee[:3, 3], ee[:3, :3]
+
+        self.steps += 1
+        self.time = self.steps * cfg.control_period
+        if self.scene.has_moving_obstacles:
+            self.scene.set_time(self.time)
+        self.scene.set_joints(self.q)
+        collided = self.scene.in_collision()
+        outside = not self.scenario.in_workspace(self.ee_pos)  # type: ignore[union-attr]
+
+        goal = self.goals[self.goal_index]
+        distance = float(np.linalg.norm(goal - self.ee_pos))
+        reached = distance < cfg.goal_tolerance
+        n_shakes = self._shake.update(distance)
+        w = cfg.rewards
+        terms = {
+            "success": R.success_reward(distance, cfg.goal_tolerance, w),
+            "collision": R.collision_reward(collided, w),
+            "distance": R.distance_reward(distance, w),
+            "shaking": R.shaking_reward(n_shakes, w),
+            "out_of_bounds": R.out_of_bounds_reward(outside, w),
+            "exhausted": 0.0,
+        }
+        final_goal = self.goal_index == len(self.goals) - 1
+        success = reached and final_goal
+        terminated = collided or outside or success
+        truncated = not terminated and self.steps >= cfg.max_steps
+        if truncated:
+            terms["exhausted"] = R.exhausted_reward(True, w)
+        if reached and not final_goal:
+            self.goal_index += 1
+            self._shake.reset()
+            distance = float(np.linalg.norm(self.goals[self.goal_index] - self.ee_pos))
+        if terminated or truncated:
+            self._ready = False
+        info = {
+            "reward_terms": terms,
+            "distance": distance,
+            "is_success": success,
+            "collision": collided,
+            "out_of_bounds": outside,
+            "goal_reached": reached,
+            "goal_index": self.goal_index,
+            "ee_position": self.ee_pos.copy(),
+            "goal": self.goals[self.goal_index].copy(),
+            "ik_converged": ik.converged,
+            "n_shakes": n_shakes,
+            "time": self.time,
+        }
+        return self._observation(distance), float(sum(terms.values())), terminated, truncated, info
+
+    def _observation(self, distance: float) -> np.ndarray:
+        obs = np.empty(OBS_SIZE, dtype=np.float32)
+        obs[0:6] = self.q
+        obs[6:9] = self.goals[self.goal_index] - self.ee_pos
+        obs[9:12] = matrix_to_rpy(self.ref_rot_t @ self.ee_rot)
+        obs[12] = distance
+        origins, directions = self.rays.world_rays(self.frames)
+        obs[N_ROBOT_OBS:] = self.caster.cast(origins, directions, self.config.ray_range)
+        return obs
+
+    # ------------------------------------------------------------------ rendering
+    def render(self):
+        if self.render_mode == "rgb_array":
+            return self.scene.camera_image(**camera_for(self.scenario))[0]
+        return None  # "human": the PyBullet GUI shows the scene live
+
+    def close(self) -> None:
+        self.scene.close()
+
+
+def camera_for(scenario: Scenario | None) -> dict[str, Any]:
+    """A camera aimed at the middle of the scenario's workspace, far enough to see it whole."""
+    if scenario is None:
+        return {}
+    low, high = np.asarray(scenario.workspace_low), np.asarray(scenario.workspace_high)
+    centre = (low + high) / 2
+    return {"target": tuple(centre), "distance": float(max(1.0, 1.8 * np.linalg.norm(high - low)))}

@@ -1,0 +1,187 @@
+"""Forward kinematics from the DH table (paper eqs. 1-2), the geometric Jacobian and
+damped-least-squares inverse kinematics (paper Algorithm 1), in numpy.
+
+Frames are in the world: the robot's base pose and the fixed URDF-to-DH rotation of its
+spec are folded into frame 0, and the tool offset into the end-effector frame, so
+``Kinematics.fk(q)`` is directly comparable to PyBullet's pose of the tool tip.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from rayreach.robots.spec import RobotSpec
+from rayreach.transforms import matrix_to_rotvec, pose_matrix, rpy_to_matrix
+
+
+@dataclass(frozen=True)
+class IKParams:
+    """Parameters of Algorithm 1.
+
+    The update is ``q += delta_int * J^T (J J^T + damping^2 I)^-1 (x_e / delta_dif)``, so
+    only the ratio ``delta_int / delta_dif`` matters; with both equal (the default) each
+    iteration is a damped Gauss-Newton step. ``tolerance`` bounds the norm of the 6-D
+    error (metres and radians together; 3-D for position-only targets).
+    """
+
+    damping: float = 0.05
+    """lambda: trades accuracy for bounded joint steps near singularities."""
+    delta_int: float = 0.01
+    """Integration step Delta_int."""
+    delta_dif: float = 0.01
+    """Differentiation step Delta_dif."""
+    tolerance: float = 1e-5
+    """epsilon: stop when ||x_e|| is at most this."""
+    max_iterations: int = 100
+    """Give up (status ``converged=False``) after this many iterations."""
+
+
+@dataclass(frozen=True)
+class IKResult:
+    q: np.ndarray
+    converged: bool
+    iterations: int
+    position_error: float
+    """Euclidean distance between reached and target position, m."""
+    orientation_error: float
+    """Angle between reached and target orientation, rad (0 for position-only targets)."""
+    frames: np.ndarray
+    """DH frames at ``q`` (see :meth:`Kinematics.frames`), so callers need not recompute them."""
+
+
+class Kinematics:
+    """Kinematics of one robot placed at a base pose in the world."""
+
+    def __init__(
+        self,
+        spec: RobotSpec,
+        base_position: tuple[float, float, float] | None = None,
+        base_rpy: tuple[float, float, float] | None = None,
+    ) -> None:
+        self.spec = spec
+        position = spec.base_position if base_position is None else base_position
+        rpy = spec.base_rpy if base_rpy is None else base_rpy
+        world_base = pose_matrix(position, rpy_to_matrix(rpy))
+        self.world_dh0 = world_base @ pose_matrix((0.0, 0.0, 0.0), rpy_to_matrix(spec.dh_base_rpy))
+        self.flange_tool = pose_matrix((0.0, 0.0, spec.tool.length), np.eye(3))
+        dh = spec.dh
+        self._d = np.asarray(dh.d, dtype=float)
+        self._a = np.asarray(dh.a, dtype=float)
+        self._ca = np.cos(np.asarray(dh.alpha, dtype=float))
+        self._sa = np.sin(np.asarray(dh.alpha, dtype=float))
+        self._offset = np.asarray(dh.offset, dtype=float)
+        self._sign = np.asarray(dh.sign, dtype=float)
+        self.lower = spec.lower_array
+        self.upper = spec.upper_array
+        n = len(self._d)
+        # constant parts of the DH matrices; cos/sin(theta) entries are filled per call
+        self._template = np.zeros((n, 4, 4))
+        self._template[:, 2, 1] = self._sa
+        self._template[:, 2, 2] = self._ca
+        self._template[:, 2, 3] = self._d
+        self._template[:, 3, 3] = 1.0
+
+    # ------------------------------------------------------------------ forward kinematics
+    def dh_matrices(self, q: np.ndarray) -> np.ndarray:
+        """The n matrices ``^{i-1}_i T(q_i)`` of paper eq. 2 (standard DH), shape (n, 4, 4)."""
+        theta = self._sign * np.asarray(q, dtype=float) + self._offset
+        ct, st = np.cos(theta), np.sin(theta)
+        m = self._template.copy()
+        m[:, 0, 0] = ct
+        m[:, 0, 1] = -st * self._ca
+        m[:, 0, 2] = st * self._sa
+        m[:, 0, 3] = self._a * ct
+        m[:, 1, 0] = st
+        m[:, 1, 1] = ct * self._ca
+        m[:, 1, 2] = -ct * self._sa
+        m[:, 1, 3] = self._a * st
+        return m
+
+    def frames(self, q: np.ndarray) -> np.ndarray:
+        """World poses of DH frames 0..n (frame n is the flange), shape (n + 1, 4, 4)."""
+        local = self.dh_matrices(q)
+        out = np.empty((len(local) + 1, 4, 4))
+        out[0] = self.world_dh0
+        for i in range(len(local)):
+            np.matmul(out[i], local[i], out=out[i + 1])
+        return out
+
+    def fk(self, q: np.ndarray) -> np.ndarray:
+        """World pose (4x4) of the end effector, the tool tip (paper eq. 1)."""
+        return self.frames(q)[-1] @ self.flange_tool
+
+    def ee_from_frames(self, frames: np.ndarray) -> np.ndarray:
+        return frames[-1] @ self.flange_tool
+
+    def jacobian(self, frames: np.ndarray, point: np.ndarray | None = None) -> np.ndarray:
+        """Geometric Jacobian (6 x n, linear rows first) of ``point`` (default: the tool tip)."""
+        if point is None:
+            point = self.ee_from_frames(frames)[:3, 3]
+        z = frames[:-1, :3, 2].T * self._sign  # (3, n): joint axes
+        r = point[:, None] - frames[:-1, :3, 3].T  # (3, n): joint to point
+        jac = np.empty((6, z.shape[1]))
+        jac[0] = z[1] * r[2] - z[2] * r[1]  # z x r, written out: np.cross is slow on tiny arrays
+        jac[1] = z[2] * r[0] - z[0] * r[2]
+        jac[2] = z[0] * r[1] - z[1] * r[0]
+        jac[3:] = z
+        return jac
+
+    # ------------------------------------------------------------------ inverse kinematics
+    def ik(
+        self,
+        target_position: np.ndarray,
+        target_rotation: np.ndarray | None,
+        q_start: np.ndarray,
+        params: IKParams = IKParams(),
+        start_frames: np.ndarray | None = None,
+    ) -> IKResult:
+        """Damped-least-squares IK (Algorithm 1) from ``q_start`` towards a world pose.
+
+        ``target_rotation=None`` solves for the position only. Joint limits are enforced
+        by clipping every iterate. The paper writes the error as ``x_c - x_d``; the update
+        must move towards the target, so the error used here is ``x_d - x_c``.
+        Never raises on failure: ``converged`` tells whether ``q`` meets the tolerance.
+        ``start_frames`` may pass ``frames(q_start)`` when the caller has them already.
+        """
+        target_position = np.asarray(target_position, dtype=float)
+        position_only = target_rotation is None
+        q = np.asarray(q_start, dtype=float)
+        if start_frames is None or np.any(q < self.lower) or np.any(q > self.upper):
+            q = np.clip(q, self.lower, self.upper)
+            start_frames = self.frames(q)
+        gain = params.delta_int / params.delta_dif
+        damping2 = params.damping**2
+        rows = 3 if position_only else 6
+        eye = np.eye(rows) * damping2
+        frames = start_frames
+        error = self._pose_error(frames, target_position, target_rotation)
+        iterations = 0
+        while True:  # do ... while ||x_e|| > epsilon
+            jac = self.jacobian(frames)[:rows]
+            qdot = jac.T @ np.linalg.solve(jac @ jac.T + eye, error)
+            q = np.clip(q + gain * qdot, self.lower, self.upper)
+            frames = self.frames(q)
+            error = self._pose_error(frames, target_position, target_rotation)
+            iterations += 1
+            norm = float(np.sqrt(error @ error))
+            if norm <= params.tolerance or iterations >= params.max_iterations:
+                break
+        return IKResult(
+            q=q,
+            converged=norm <= params.tolerance,
+            iterations=iterations,
+            position_error=float(np.linalg.norm(error[:3])),
+            orientation_error=0.0 if position_only else float(np.linalg.norm(error[3:])),
+            frames=frames,
+        )
+
+    def _pose_error(
+        self, frames: np.ndarray, target_position: np.ndarray, target_rotation: np.ndarray | None
+    ) -> np.ndarray:
+        ee = self.ee_from_frames(frames)
+        dp = target_position - ee[:3, 3]
+        if target_rotation is None:
+            return dp
+        return np.concatenate((dp, matrix_to_rotvec(target_rotation @ ee[:3, :3].T)))

@@ -1,0 +1,32 @@
+"""Scenarios: the seven experiments of the paper, users' scene files and random worlds."""
+
+from __future__ import annotations
+
+from importlib import resources
+from pathlib import Path
+
+from rayreach.scenarios.schema import ObstacleSpec, Scenario, ScenarioError, StartSpec, load_scenario_file
+
+EXPERIMENTS = tuple(f"exp{i}" for i in range(1, 8))
+RANDOM = "random"
+
+
+def builtin_path(name: str) -> Path:
+    return Path(str(resources.files("rayreach.scenarios") / "data" / f"{name}.json"))
+
+
+def get_scenario(name: str | Path | Scenario) -> Scenario:
+    """A built-in experiment by name (``exp1``..``exp7``), a scene file path, or a Scenario."""
+    if isinstance(name, Scenario):
+        return name
+    text = str(name)
+    if text in EXPERIMENTS:
+        return load_scenario_file(builtin_path(text))
+    if text.endswith(".json") or Path(text).is_file():
+        return load_scenario_file(text)
+    raise ScenarioError(
+        f"unknown scenario '{text}'; known: {', '.join(EXPERIMENTS)}, '{RANDOM}', or a path to a .json scene file"
+    )
+
+
+__all__ = ["EXPERIMENTS", "RANDOM", "ObstacleSpec", "Scenario", "ScenarioError", "StartSpec", "get_scenario"]

@@ -1,0 +1,166 @@
+"""Random training worlds: plates, moving plates, shelves and clutter between start and goal.
+
+Every world drawn here has a reachable, collision-free start (6-D IK to a tool pose of the
+robot's default orientation) and a reachable, collision-free goal configuration (position
+IK), checked in the caller's scene; all randomness comes from the generator passed in.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from rayreach.kinematics import IKParams, Kinematics
+from rayreach.scenarios.feasibility import goal_configuration
+from rayreach.scenarios.schema import ObstacleSpec, Scenario, StartSpec
+from rayreach.scene import Scene
+from rayreach.transforms import rpy_to_matrix
+
+KINDS = ("plate", "moving_plate", "box", "sphere", "shelf")
+
+
+@dataclass(frozen=True)
+class RandomWorldConfig:
+    n_obstacles: int = 3
+    """How many obstacles (a shelf counts as one); the obstacle curriculum drives it."""
+    kinds: tuple[str, ...] | None = None
+    """Obstacle kinds to draw from (see ``KINDS``); None: the robot's ``training_kinds``."""
+    min_goal_distance: float = 0.2
+    """Least distance between start and goal, m."""
+    margin: float = 0.03
+    """Start and goal keep this far inside the workspace bounds, m."""
+    speed: tuple[float, float] = (0.05, 0.2)
+    """Speed range of moving plates, m/s."""
+    max_tries: int = 200
+
+
+def shelf_boxes(
+    center: tuple[float, float, float],
+    width: float = 1.0,
+    height: float = 1.0,
+    depth: float = 0.3,
+    thickness: float = 0.06,
+    prefix: str = "",
+) -> tuple[list[ObstacleSpec], list[tuple[float, float, float]]]:
+    """A 2 x 2 shelf open towards +-y: three boards, three walls, and its compartment centres
+    (lower left, lower right, upper left, upper right; left = -x)."""
+    cx, cy, cz = center
+    boxes = [
+        ObstacleSpec("box", (cx, cy, cz + dz), half_extents=(width / 2, depth / 2, thickness / 2), name=f"{prefix}board_{i}")
+        for i, dz in enumerate((-height / 2, 0.0, height / 2))
+    ]
+    boxes += [
+        ObstacleSpec("box", (cx + dx, cy, cz), half_extents=(thickness / 2, depth / 2, height / 2), name=f"{prefix}wall_{i}")
+        for i, dx in enumerate((-width / 2, 0.0, width / 2))
+    ]
+    centres = [(cx + sx * width / 4, cy, cz + sz * height / 4) for sz in (-1, 1) for sx in (-1, 1)]
+    return boxes, centres
+
+
+class RandomWorlds:
+    """Draws random scenarios for one robot, checking them in ``scene`` (which it modifies)."""
+
+    def __init__(self, kin: Kinematics, scene: Scene, config: RandomWorldConfig = RandomWorldConfig()) -> None:
+        self.kin = kin
+        self.scene = scene
+        self.config = config
+        spec = kin.spec
+        self.kinds = config.kinds if config.kinds is not None else spec.training_kinds
+        unknown = [k for k in self.kinds if k not in KINDS]
+        if unknown:
+            raise ValueError(f"unknown obstacle kind(s) {unknown}; known: {', '.join(KINDS)}")
+        self.low = np.asarray(spec.workspace_low) + config.margin
+        self.high = np.asarray(spec.workspace_high) - config.margin
+        self.tool_rot = rpy_to_matrix(spec.tool_rpy)
+        self._ik = IKParams(tolerance=1e-4, max_iterations=100)
+
+    def sample(self, rng: np.random.Generator, n_obstacles: int | None = None) -> tuple[Scenario, np.ndarray]:
+        """A feasible scenario and its start configuration; the scene holds its obstacles."""
+        n = self.config.n_obstacles if n_obstacles is None else n_obstacles
+        if n < 0:
+            raise ValueError(f"n_obstacles must be >= 0, got {n}")
+        spec = self.kin.spec
+        for _ in range(self.config.max_tries):
+            start = rng.uniform(self.low, self.high)
+            ik = self.kin.ik(start, self.tool_rot, np.asarray(spec.home), self._ik)
+            if not ik.converged:
+                continue
+            q_start = ik.q
+            start = self.kin.fk(q_start)[:3, 3]
+            obstacles: list[ObstacleSpec] = []
+            kinds = [str(k) for k in rng.choice(self.kinds, size=n)] if n and self.kinds else []
+            if "shelf" in kinds:  # at most one shelf; the goal goes into one of its compartments
+                kinds = [k for k in kinds if k != "shelf"]
+                boxes, goal = self._shelf(rng, start)
+                obstacles += boxes
+            else:
+                goal = rng.uniform(self.low, self.high)
+            if np.linalg.norm(goal - start) < self.config.min_goal_distance or not self._inside(goal):
+                continue
+            obstacles += [self._obstacle(kind, rng, start, goal, i) for i, kind in enumerate(kinds)]
+            q_goal = goal_configuration(self.kin, goal, q_start, rng, n_random_seeds=2)
+            if q_goal is None:
+                continue
+            self.scene.set_obstacles(obstacles)
+            self.scene.set_joints(q_goal)
+            if self.scene.in_collision():
+                continue
+            self.scene.set_joints(q_start)
+            if self.scene.in_collision():
+                continue
+            scenario = Scenario(
+                name="random",
+                robot=spec.name,
+                start=StartSpec(joints=tuple(float(v) for v in q_start)),
+                goals=(tuple(float(v) for v in goal),),  # type: ignore[arg-type]
+                obstacles=tuple(obstacles),
+                workspace_low=tuple(spec.workspace_low),  # type: ignore[arg-type]
+                workspace_high=tuple(spec.workspace_high),  # type: ignore[arg-type]
+                description=f"random world with {n} obstacle(s)",
+            )
+            return scenario, q_start
+        raise RuntimeError(
+            f"no feasible random world for {spec.name} with {n} obstacle(s) in {self.config.max_tries} tries"
+        )
+
+    def _inside(self, point: np.ndarray) -> bool:
+        return bool(np.all(point >= self.low) and np.all(point <= self.high))
+
+    def _shelf(self, rng: np.random.Generator, start: np.ndarray) -> tuple[list[ObstacleSpec], np.ndarray]:
+        centre = (float(rng.uniform(-0.2, 0.2)), float(rng.uniform(0.15, 0.35)), float(rng.uniform(1.0, 1.2)))
+        boxes, compartments = shelf_boxes(centre, prefix="shelf_")
+        cx, cy, cz = compartments[int(rng.integers(len(compartments)))]
+        depth_offset = float(rng.uniform(0.0, 0.25))  # inside the compartment or just behind it
+        goal = np.array([cx, cy + depth_offset, cz]) + rng.uniform(-0.1, 0.1, 3) * np.array([1.0, 0.0, 1.0])
+        return boxes, goal
+
+    def _obstacle(
+        self, kind: str, rng: np.random.Generator, start: np.ndarray, goal: np.ndarray, index: int
+    ) -> ObstacleSpec:
+        along = start + rng.uniform(0.3, 0.7) * (goal - start)
+        centre = tuple(float(v) for v in along + rng.uniform(-0.05, 0.05, 3))
+        heading = math.atan2(goal[1] - start[1], goal[0] - start[0])
+        scale = float(rng.uniform(0.8, 1.2))
+        if kind in ("plate", "moving_plate"):
+            if rng.random() < 0.5:  # upright, facing along the straight path
+                half = (0.002, 0.08 * scale, 0.05 * scale)
+                rpy = (0.0, 0.0, heading)
+            else:  # lying flat
+                half = (0.06 * scale, 0.06 * scale, 0.002)
+                rpy = (0.0, 0.0, float(rng.uniform(0, math.pi)))
+            velocity = (0.0, 0.0, 0.0)
+            travel = None
+            if kind == "moving_plate":
+                speed = float(rng.uniform(*self.config.speed))
+                side = heading + math.pi / 2
+                velocity = (speed * math.cos(side), speed * math.sin(side), 0.0)
+                travel = float(rng.uniform(0.1, 0.3))
+            return ObstacleSpec("box", centre, rpy=rpy, half_extents=half, velocity=velocity, travel=travel,
+                                name=f"{kind}_{index}")
+        if kind == "box":
+            half = tuple(float(v) for v in rng.uniform(0.02, 0.05, 3))
+            return ObstacleSpec("box", centre, rpy=(0.0, 0.0, float(rng.uniform(0, math.pi))), half_extents=half,
+                                name=f"box_{index}")  # type: ignore[arg-type]
+        return ObstacleSpec("sphere", centre, radius=0.04 * scale, name=f"sphere_{index}")

@@ -1,0 +1,246 @@
+"""Virtual laser sensors (paper section "Observation Space"): ray layouts and ray casting.
+
+The 129 rays, in observation order:
+
+====  ======  ===========  ===========================================================
+from  count   sensor       layout (in the mount frame, z = the tool's pointing axis)
+====  ======  ===========  ===========================================================
+0     24      wrist        2 cones of 12 rays, 30 deg apart around z, polar angle 40 deg:
+                           first the cone opening along +z (towards the work), then the
+                           one along -z (back towards the arm); origin on the tool axis
+                           behind the flange
+24    80      wraparound   8 columns 45 deg apart around the tool, 10 rays each, radial
+                           (perpendicular to the tool), origins on the tool's surface,
+                           evenly spaced along it; column-major (azimuth, then height
+                           from flange to tip)
+104   25      tip          1 ray along +z, then 2 rings of 12 rays 30 deg apart at polar
+                           angles 20 and 40 deg, origin at the tool tip
+====  ======  ===========  ===========================================================
+
+Each ray reports its hit fraction in [0, 1] over ``RAY_RANGE`` (1 = nothing within range).
+The robot (arm and tool) is invisible to the rays.
+
+Two casting backends share one interface: :class:`NumpyCaster` (analytic intersection with
+boxes, spheres and cylinders, vectorised; the default when every obstacle is a primitive)
+and :class:`BulletCaster` (PyBullet ``rayTestBatch``, the reference, works with any mesh).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+
+from rayreach.robots.spec import RobotSpec, SensorMount
+from rayreach.transforms import pose_matrix, rpy_to_matrix
+
+RAY_RANGE = 0.4
+"""Sensor range in metres (paper: 0.4 m for every sensor)."""
+N_RAYS = 129
+SENSOR_SLICES = {"wrist": slice(0, 24), "wraparound": slice(24, 104), "tip": slice(104, 129)}
+
+
+@dataclass(frozen=True)
+class RayGroup:
+    """Rays fixed in one mount frame: local origins and unit directions, shape (n, 3)."""
+
+    mount: str
+    origins: np.ndarray
+    directions: np.ndarray
+
+
+def _cone(polar_deg: float, n_azimuth: int, step_deg: float, axis_sign: float = 1.0) -> np.ndarray:
+    polar = math.radians(polar_deg)
+    az = np.radians(np.arange(n_azimuth) * step_deg)
+    s = math.sin(polar)
+    return np.stack((s * np.cos(az), s * np.sin(az), np.full(n_azimuth, axis_sign * math.cos(polar))), axis=1)
+
+
+def ray_layout(spec: RobotSpec) -> list[RayGroup]:
+    """The paper's three sensors for a robot, in observation order (see the module table)."""
+    length, radius = spec.tool.length, spec.tool.radius
+    wrist_dirs = np.concatenate((_cone(40, 12, 30, +1.0), _cone(40, 12, 30, -1.0)))
+    wrist = RayGroup("wrist", np.zeros((24, 3)), wrist_dirs)
+
+    az = np.radians(np.arange(8) * 45.0)
+    heights = (np.arange(10) + 0.5) * length / 10.0
+    radial = np.stack((np.cos(az), np.sin(az), np.zeros(8)), axis=1)
+    wrap_dirs = np.repeat(radial, 10, axis=0)
+    wrap_origins = wrap_dirs * radius + np.stack(
+        (np.zeros(80), np.zeros(80), np.tile(heights, 8)), axis=1
+    )
+    wrap = RayGroup("tool", wrap_origins, wrap_dirs)
+
+    tip_dirs = np.concatenate(([[0.0, 0.0, 1.0]], _cone(20, 12, 30), _cone(40, 12, 30)))
+    tip = RayGroup("tool", np.tile([0.0, 0.0, length], (25, 1)), tip_dirs)
+    return [wrist, wrap, tip]
+
+
+def mount_offset(mount: SensorMount) -> np.ndarray:
+    return pose_matrix(mount.xyz, rpy_to_matrix(mount.rpy))
+
+
+class RayModel:
+    """Turns DH frames into world ray origins and end points for one robot."""
+
+    def __init__(self, spec: RobotSpec, ray_range: float = RAY_RANGE) -> None:
+        self.ray_range = ray_range
+        groups = ray_layout(spec)
+        self._frames = [spec.mounts[g.mount].frame for g in groups]
+        self._offsets = [mount_offset(spec.mounts[g.mount]) for g in groups]
+        # local origins/directions in homogeneous form, one block per group
+        self._local_o = [g.origins.T for g in groups]
+        self._local_d = [g.directions.T for g in groups]
+        self.n_rays = sum(len(g.origins) for g in groups)
+
+    def world_rays(self, frames: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """World origins and unit directions, each (n_rays, 3), from the robot's DH frames."""
+        origins, directions = [], []
+        for frame, offset, lo, ld in zip(self._frames, self._offsets, self._local_o, self._local_d):
+            pose = frames[frame] @ offset
+            rot, pos = pose[:3, :3], pose[:3, 3:4]
+            origins.append(rot @ lo + pos)
+            directions.append(rot @ ld)
+        return np.concatenate(origins, axis=1).T, np.concatenate(directions, axis=1).T
+
+
+class RayCaster(Protocol):
+    """Casts rays of length ``ray_range`` and returns hit fractions in [0, 1]."""
+
+    def cast(self, origins: np.ndarray, directions: np.ndarray, ray_range: float) -> np.ndarray: ...
+
+
+@dataclass
+class PrimitiveSet:
+    """Obstacles as arrays, grouped by shape, in the form the numpy caster consumes.
+
+    Poses are world positions and rotation matrices; ``half_extents`` for boxes, ``radius``
+    for spheres, ``radius`` and ``half_height`` (along local z) for cylinders.
+    """
+
+    box_pos: np.ndarray
+    box_rot: np.ndarray
+    box_half: np.ndarray
+    sphere_pos: np.ndarray
+    sphere_radius: np.ndarray
+    cyl_pos: np.ndarray
+    cyl_rot: np.ndarray
+    cyl_radius: np.ndarray
+    cyl_half_height: np.ndarray
+
+    @staticmethod
+    def empty() -> "PrimitiveSet":
+        z3, z33, z = np.zeros((0, 3)), np.zeros((0, 3, 3)), np.zeros(0)
+        return PrimitiveSet(z3, z33, z3, z3, z, z3, z33, z, z)
+
+
+_BIG = 1e30
+
+
+def _first_hit(t_near: np.ndarray, t_far: np.ndarray) -> np.ndarray:
+    """Per (obstacle, ray): entry distance if the segment [0, inf) meets the span, else +inf.
+
+    A ray whose origin lies inside an obstacle hits at distance 0.
+    """
+    hit = (t_near <= t_far) & (t_far >= 0.0)
+    return np.where(hit, np.maximum(t_near, 0.0), np.inf)
+
+
+class NumpyCaster:
+    """Analytic ray casting against boxes, spheres and cylinders, all rays at once."""
+
+    def __init__(self, primitives: PrimitiveSet) -> None:
+        self.primitives = primitives
+
+    def cast(self, origins: np.ndarray, directions: np.ndarray, ray_range: float) -> np.ndarray:
+        prim = self.primitives
+        best = np.full(len(origins), np.inf)
+        if len(prim.box_pos):
+            best = np.minimum(best, self._boxes(origins, directions).min(axis=0))
+        if len(prim.sphere_pos):
+            best = np.minimum(best, self._spheres(origins, directions).min(axis=0))
+        if len(prim.cyl_pos):
+            best = np.minimum(best, self._cylinders(origins, directions).min(axis=0))
+        return np.minimum(best / ray_range, 1.0)
+
+    def _local(self, pos: np.ndarray, rot: np.ndarray, origins: np.ndarray, directions: np.ndarray):
+        # rows of rot^T applied to each ray: (k, n, 3)
+        o = np.einsum("kji,knj->kni", rot, origins[None, :, :] - pos[:, None, :])
+        d = np.einsum("kji,nj->kni", rot, directions)
+        return o, d
+
+    def _boxes(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
+        prim = self.primitives
+        o, d = self._local(prim.box_pos, prim.box_rot, origins, directions)
+        half = prim.box_half[:, None, :]
+        safe = np.where(np.abs(d) < 1e-300, 1e-300, d)
+        inv = 1.0 / safe
+        t1 = (-half - o) * inv
+        t2 = (half - o) * inv
+        t_near = np.minimum(t1, t2).max(axis=2)
+        t_far = np.maximum(t1, t2).min(axis=2)
+        return _first_hit(t_near, t_far)
+
+    def _spheres(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
+        prim = self.primitives
+        oc = origins[None, :, :] - prim.sphere_pos[:, None, :]
+        b = np.einsum("knj,nj->kn", oc, directions)
+        c = np.einsum("knj,knj->kn", oc, oc) - prim.sphere_radius[:, None] ** 2
+        disc = b * b - c
+        root = np.sqrt(np.maximum(disc, 0.0))
+        t_near, t_far = -b - root, -b + root
+        t_near = np.where(disc >= 0.0, t_near, _BIG)
+        t_far = np.where(disc >= 0.0, t_far, -_BIG)
+        return _first_hit(t_near, t_far)
+
+    def _cylinders(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
+        prim = self.primitives
+        o, d = self._local(prim.cyl_pos, prim.cyl_rot, origins, directions)
+        r = prim.cyl_radius[:, None]
+        h = prim.cyl_half_height[:, None]
+        # infinite cylinder x^2 + y^2 <= r^2
+        a = d[..., 0] ** 2 + d[..., 1] ** 2
+        b = o[..., 0] * d[..., 0] + o[..., 1] * d[..., 1]
+        c = o[..., 0] ** 2 + o[..., 1] ** 2 - r**2
+        disc = b * b - a * c
+        parallel = a < 1e-12
+        root = np.sqrt(np.maximum(disc, 0.0))
+        a_safe = np.where(parallel, 1.0, a)
+        side_near = np.where(parallel, np.where(c <= 0.0, -_BIG, _BIG), (-b - root) / a_safe)
+        side_far = np.where(parallel, np.where(c <= 0.0, _BIG, -_BIG), (-b + root) / a_safe)
+        missing = ~parallel & (disc < 0.0)
+        side_near = np.where(missing, _BIG, side_near)
+        side_far = np.where(missing, -_BIG, side_far)
+        # slab |z| <= h
+        dz = np.where(np.abs(d[..., 2]) < 1e-300, 1e-300, d[..., 2])
+        z1 = (-h - o[..., 2]) / dz
+        z2 = (h - o[..., 2]) / dz
+        t_near = np.maximum(side_near, np.minimum(z1, z2))
+        t_far = np.minimum(side_far, np.maximum(z1, z2))
+        return _first_hit(t_near, t_far)
+
+
+class BulletCaster:
+    """PyBullet's ``rayTestBatch``: the reference backend; sees every obstacle shape.
+
+    The robot's collision group is left out of ``collisionFilterMask`` (see ``scene.py``),
+    so rays pass through the arm and tool.
+    """
+
+    def __init__(self, client: int, collision_mask: int) -> None:
+        self.client = client
+        self.collision_mask = collision_mask
+
+    def cast(self, origins: np.ndarray, directions: np.ndarray, ray_range: float) -> np.ndarray:
+        import pybullet as p
+
+        ends = origins + directions * ray_range
+        hits = p.rayTestBatch(
+            origins.tolist(),
+            ends.tolist(),
+            collisionFilterMask=self.collision_mask,
+            physicsClientId=self.client,
+        )
+        return np.array([1.0 if h[0] < 0 else h[2] for h in hits])
