@@ -1,4 +1,4 @@
-"""Silence PyBullet's C-level chatter (build banner, URDF inertia warnings) on stdout."""
+"""Silence PyBullet's C-level warnings on stdout (URDF links without inertia, on every load)."""
 
 from __future__ import annotations
 
@@ -27,3 +27,4 @@ def c_stdout_suppressed() -> Iterator[None]:
         os.dup2(saved, fd)
         os.close(saved)
         os.close(devnull)
+

@@ -14,12 +14,9 @@ from contextlib import contextmanager
 from typing import Iterator, Sequence
 
 import numpy as np
+import pybullet as p
 
 from rayreach.quiet import c_stdout_suppressed
-
-with c_stdout_suppressed():
-    import pybullet as p
-
 from rayreach.robots.spec import RobotSpec
 from rayreach.robots.urdf import TCP_LINK, resolved_urdf
 from rayreach.scenarios.schema import ObstacleSpec
