@@ -75,6 +75,7 @@ class Kinematics:
         self._sign = np.asarray(dh.sign, dtype=float)
         self.lower = spec.lower_array
         self.upper = spec.upper_array
+        self._eye = {3: np.eye(3), 6: np.eye(6)}
         n = len(self._d)
         # constant parts of the DH matrices; cos/sin(theta) entries are filled per call
         self._template = np.zeros((n, 4, 4))
@@ -143,25 +144,26 @@ class Kinematics:
         by clipping every iterate. The paper writes the error as ``x_c - x_d``; the update
         must move towards the target, so the error used here is ``x_d - x_c``.
         Never raises on failure: ``converged`` tells whether ``q`` meets the tolerance.
-        ``start_frames`` may pass ``frames(q_start)`` when the caller has them already.
+        ``start_frames`` may pass ``frames(q_start)`` when the caller has them already (the
+        hot path of the environment); ``q_start`` must then lie within the joint limits.
         """
         target_position = np.asarray(target_position, dtype=float)
         position_only = target_rotation is None
-        q = np.asarray(q_start, dtype=float)
-        if start_frames is None or np.any(q < self.lower) or np.any(q > self.upper):
-            q = np.clip(q, self.lower, self.upper)
-            start_frames = self.frames(q)
+        lower, upper = self.lower, self.upper
+        if start_frames is None:
+            q = np.minimum(np.maximum(np.asarray(q_start, dtype=float), lower), upper)
+            frames = self.frames(q)
+        else:
+            q, frames = np.asarray(q_start, dtype=float), start_frames
         gain = params.delta_int / params.delta_dif
-        damping2 = params.damping**2
         rows = 3 if position_only else 6
-        eye = np.eye(rows) * damping2
-        frames = start_frames
+        eye = self._eye[rows] * params.damping**2
         error = self._pose_error(frames, target_position, target_rotation)
         iterations = 0
         while True:  # do ... while ||x_e|| > epsilon
             jac = self.jacobian(frames)[:rows]
             qdot = jac.T @ np.linalg.solve(jac @ jac.T + eye, error)
-            q = np.clip(q + gain * qdot, self.lower, self.upper)
+            q = np.minimum(np.maximum(q + gain * qdot, lower), upper)
             frames = self.frames(q)
             error = self._pose_error(frames, target_position, target_rotation)
             iterations += 1
@@ -172,8 +174,8 @@ class Kinematics:
             q=q,
             converged=norm <= params.tolerance,
             iterations=iterations,
-            position_error=float(np.linalg.norm(error[:3])),
-            orientation_error=0.0 if position_only else float(np.linalg.norm(error[3:])),
+            position_error=float(np.sqrt(error[:3] @ error[:3])),
+            orientation_error=0.0 if position_only else float(np.sqrt(error[3:] @ error[3:])),
             frames=frames,
         )
 

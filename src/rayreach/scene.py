@@ -101,8 +101,9 @@ class Scene:
 
     # ------------------------------------------------------------------ robot
     def set_joints(self, q: Sequence[float]) -> None:
-        for index, value in zip(self.joint_indices, q):
-            p.resetJointState(self.robot, index, float(value), physicsClientId=self.client)
+        p.resetJointStatesMultiDof(
+            self.robot, self.joint_indices, [[float(v)] for v in q], physicsClientId=self.client
+        )
 
     def tcp_pose(self) -> tuple[np.ndarray, np.ndarray]:
         """PyBullet's own pose of the tool tip: position and (x, y, z, w) quaternion."""

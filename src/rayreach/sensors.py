@@ -88,22 +88,34 @@ class RayModel:
     def __init__(self, spec: RobotSpec, ray_range: float = RAY_RANGE) -> None:
         self.ray_range = ray_range
         groups = ray_layout(spec)
-        self._frames = [spec.mounts[g.mount].frame for g in groups]
-        self._offsets = [mount_offset(spec.mounts[g.mount]) for g in groups]
-        # local origins/directions in homogeneous form, one block per group
-        self._local_o = [g.origins.T for g in groups]
-        self._local_d = [g.directions.T for g in groups]
         self.n_rays = sum(len(g.origins) for g in groups)
+        # one block per mount (rays of a mount move together), each (frame, offset, rows,
+        # local origins (n, 3), local directions (3, n)); rows keep the observation order
+        self._blocks = []
+        start = 0
+        rows_of: dict[str, list[int]] = {}
+        for g in groups:
+            rows_of.setdefault(g.mount, []).extend(range(start, start + len(g.origins)))
+            start += len(g.origins)
+        all_o = np.concatenate([g.origins for g in groups])
+        all_d = np.concatenate([g.directions for g in groups])
+        for mount, rows in rows_of.items():
+            if rows != list(range(rows[0], rows[-1] + 1)):
+                raise ValueError(f"rays of mount '{mount}' must be contiguous in the layout")
+            m = spec.mounts[mount]
+            block = slice(rows[0], rows[-1] + 1)
+            self._blocks.append((m.frame, mount_offset(m), block, all_o[block], all_d[block].T.copy()))
 
     def world_rays(self, frames: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """World origins and unit directions, each (n_rays, 3), from the robot's DH frames."""
-        origins, directions = [], []
-        for frame, offset, lo, ld in zip(self._frames, self._offsets, self._local_o, self._local_d):
+        origins = np.empty((self.n_rays, 3))
+        directions = np.empty((self.n_rays, 3))
+        for frame, offset, rows, lo, ld in self._blocks:
             pose = frames[frame] @ offset
-            rot, pos = pose[:3, :3], pose[:3, 3:4]
-            origins.append(rot @ lo + pos)
-            directions.append(rot @ ld)
-        return np.concatenate(origins, axis=1).T, np.concatenate(directions, axis=1).T
+            rot = pose[:3, :3]
+            origins[rows] = lo @ rot.T + pose[:3, 3]
+            directions[rows] = (rot @ ld).T
+        return origins, directions
 
 
 class RayCaster(Protocol):
@@ -166,9 +178,9 @@ class NumpyCaster:
         return np.minimum(best / ray_range, 1.0)
 
     def _local(self, pos: np.ndarray, rot: np.ndarray, origins: np.ndarray, directions: np.ndarray):
-        # rows of rot^T applied to each ray: (k, n, 3)
-        o = np.einsum("kji,knj->kni", rot, origins[None, :, :] - pos[:, None, :])
-        d = np.einsum("kji,nj->kni", rot, directions)
+        """Rays in each obstacle's frame, (k, n, 3): row vectors times R is R^T applied."""
+        o = np.matmul(origins[None, :, :] - pos[:, None, :], rot)
+        d = np.matmul(directions[None, :, :], rot)
         return o, d
 
     def _boxes(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:

@@ -1,0 +1,121 @@
+"""The ``rayreach`` command. Arguments are parsed before PyBullet or torch are imported."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from typing import Sequence
+
+
+def _scenario_arg(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "scenario_pos", nargs="?", metavar="SCENARIO", help="exp1..exp7 or a scene .json file"
+    )
+    parser.add_argument("--scenario", dest="scenario_opt", help="same as the positional SCENARIO")
+
+
+def _pick_scenario(args: argparse.Namespace, parser: argparse.ArgumentParser) -> str:
+    scenario = args.scenario_opt or args.scenario_pos
+    if not scenario:
+        parser.error("give a scenario: exp1..exp7 or a path to a scene .json file")
+    return scenario
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="rayreach", description=__doc__)
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    show = sub.add_parser("show", help="render a scenario with its rays to a PNG (or open the GUI)")
+    _scenario_arg(show)
+    show.add_argument("--out", default=None, help="PNG file to write (default: SCENARIO.png)")
+    show.add_argument("--gui", action="store_true", help="open PyBullet's GUI instead (needs a display)")
+    show.add_argument("--seed", type=int, default=0)
+
+    bench = sub.add_parser("bench-env", help="environment steps per second for both ray backends")
+    bench.add_argument("--robot", default="ur5", help="ur5 or kr16")
+    bench.add_argument("--scenario", default="exp1", help="exp1..exp7, random, or a scene file")
+    bench.add_argument("--steps", type=int, default=3000)
+    bench.add_argument("--rounds", type=int, default=3, help="interleaved blocks per backend")
+    bench.add_argument("--json", action="store_true", help="print one JSON line")
+
+    demo = sub.add_parser("demo", help="a scripted episode on exp1, drawn to a PNG")
+    demo.add_argument("--scenario", default="exp1")
+    demo.add_argument("--out", default="demo", help="output directory")
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    from rayreach.scenarios import ScenarioError
+
+    try:
+        if args.command == "show":
+            return _show(args, _pick_scenario(args, parser))
+        if args.command == "bench-env":
+            return _bench(args)
+        if args.command == "demo":
+            return _demo(args)
+    except (ScenarioError, ValueError, FileNotFoundError) as exc:
+        print(f"rayreach {args.command}: {exc}", file=sys.stderr)
+        return 2
+    parser.error(f"unknown command {args.command}")
+    return 2
+
+
+def _show(args: argparse.Namespace, scenario: str) -> int:
+    from rayreach.env import ReachEnv
+    from rayreach.render import draw_scene
+
+    if args.gui:
+        env = ReachEnv(scenario=scenario, render_mode="human")
+        env.reset(seed=args.seed)
+        print("PyBullet GUI open; press Enter to close.")
+        input()
+        env.close()
+        return 0
+    env = ReachEnv(scenario=scenario)
+    env.reset(seed=args.seed)
+    name = env.scenario.name if env.scenario else "scene"
+    out = draw_scene(env, args.out or f"{name}.png")
+    env.close()
+    print(f"wrote {out}")
+    return 0
+
+
+def _bench(args: argparse.Namespace) -> int:
+    from rayreach.bench import bench_env
+
+    result = bench_env(args.robot, args.scenario, steps=args.steps, rounds=args.rounds)
+    record = {
+        "robot": args.robot,
+        "scenario": args.scenario,
+        "steps": result.steps,
+        "steps_per_s": {k: round(v, 1) for k, v in result.steps_per_s.items()},
+        "default_backend": "numpy",
+        "speedup": round(result.speedup, 3),
+    }
+    if args.json:
+        print(json.dumps(record))
+    else:
+        for backend, sps in record["steps_per_s"].items():
+            print(f"{backend:>7}: {sps:8.0f} steps/s")
+        print(f"speedup of numpy over rayTestBatch: {record['speedup']:.2f}x ({result.steps} steps each)")
+    return 0
+
+
+def _demo(args: argparse.Namespace) -> int:
+    from rayreach.demo import scripted_episode
+
+    summary = scripted_episode(args.scenario, args.out)
+    print(
+        f"{args.scenario}: scripted episode, {summary.steps} steps, success={summary.success}, "
+        f"collision={summary.collision}, path {summary.path_length:.3f} m, return {summary.total_reward:.2f}"
+    )
+    print(f"picture: {summary.picture}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
