@@ -38,6 +38,7 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument("--steps", type=int, default=3000)
     bench.add_argument("--rounds", type=int, default=3, help="interleaved blocks per backend")
     bench.add_argument("--json", action="store_true", help="print one JSON line")
+    bench.add_argument("--breakdown", action="store_true", help="also time each part of a step (us per call)")
 
     demo = sub.add_parser("demo", help="a scripted episode on exp1, drawn to a PNG")
     demo.add_argument("--scenario", default="exp1")
@@ -85,10 +86,10 @@ def _show(args: argparse.Namespace, scenario: str) -> int:
 
 
 def _bench(args: argparse.Namespace) -> int:
-    from rayreach.bench import bench_env
+    from rayreach.bench import bench_env, step_breakdown
 
     result = bench_env(args.robot, args.scenario, steps=args.steps, rounds=args.rounds)
-    record = {
+    record: dict = {
         "robot": args.robot,
         "scenario": args.scenario,
         "steps": result.steps,
@@ -96,12 +97,17 @@ def _bench(args: argparse.Namespace) -> int:
         "default_backend": "numpy",
         "speedup": round(result.speedup, 3),
     }
+    if args.breakdown:
+        record["us_per_call"] = step_breakdown(args.robot, args.scenario)
+        record["us_per_call"]["whole_step"] = round(1e6 / result.steps_per_s["numpy"], 1)
     if args.json:
         print(json.dumps(record))
-    else:
-        for backend, sps in record["steps_per_s"].items():
-            print(f"{backend:>7}: {sps:8.0f} steps/s")
-        print(f"speedup of numpy over rayTestBatch: {record['speedup']:.2f}x ({result.steps} steps each)")
+        return 0
+    for backend, sps in record["steps_per_s"].items():
+        print(f"{backend:>7}: {sps:8.0f} steps/s")
+    print(f"speedup of numpy over rayTestBatch: {record['speedup']:.2f}x ({result.steps} steps each)")
+    for part, us in record.get("us_per_call", {}).items():
+        print(f"{part:>22}: {us:7.1f} us")
     return 0
 
 

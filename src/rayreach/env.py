@@ -290,4 +290,4 @@ def camera_for(scenario: Scenario | None) -> dict[str, Any]:
         return {}
     low, high = np.asarray(scenario.workspace_low), np.asarray(scenario.workspace_high)
     centre = (low + high) / 2
-    return {"target": tuple(centre), "distance": float(max(0.9, 1.2 * np.linalg.norm(high - low)))}
+    return {"target": tuple(centre), "distance": float(max(1.0, 1.25 * np.linalg.norm(high - low)))}

@@ -262,8 +262,8 @@ class Scene:
         height: int = 480,
         target: Sequence[float] = (0.0, 0.3, 0.4),
         distance: float = 1.6,
-        yaw: float = 50.0,
-        pitch: float = -30.0,
+        yaw: float = 210.0,
+        pitch: float = -25.0,
         fov: float = 50.0,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """RGB image (h, w, 3 uint8) from PyBullet's headless renderer, with its view and
