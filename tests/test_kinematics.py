@@ -43,7 +43,9 @@ def test_fk_matches_pybullet_tool_tip_and_flange(rig):
         worst["tip_rot"] = max(worst["tip_rot"], rotation_angle(bullet_rotation(quat), tip[:3, :3]))
         fpos, fquat = scene.link_pose("tool0")
         worst["flange_pos"] = max(worst["flange_pos"], float(np.linalg.norm(fpos - frames[6][:3, 3])))
-        worst["flange_rot"] = max(worst["flange_rot"], rotation_angle(bullet_rotation(fquat), frames[6][:3, :3]))
+        worst["flange_rot"] = max(
+            worst["flange_rot"], rotation_angle(bullet_rotation(fquat), frames[6][:3, :3])
+        )
     assert worst["tip_pos"] < POS_TOL, worst
     assert worst["flange_pos"] < POS_TOL, worst
     assert worst["tip_rot"] < ROT_TOL, worst
@@ -177,7 +179,12 @@ def test_jacobian_matches_pybullet_calculate_jacobian(rig):
         q = rig.random_q(rng)
         scene.set_joints(q)
         lin, ang = p.calculateJacobian(
-            scene.robot, scene.tcp_link, [0.0, 0.0, 0.0], list(map(float, q)), [0.0] * 6, [0.0] * 6,
+            scene.robot,
+            scene.tcp_link,
+            [0.0, 0.0, 0.0],
+            list(map(float, q)),
+            [0.0] * 6,
+            [0.0] * 6,
             physicsClientId=scene.client,
         )
         jac = kin.jacobian(kin.frames(q))
@@ -193,7 +200,8 @@ def _smallest_singular_value(kin: Kinematics, q: np.ndarray) -> float:
 WELL_CONDITIONED = 0.02
 """sigma_min(J) above which a target counts as away from singularities. DLS with a constant
 lambda = 0.05 contracts the error along a singular direction by lambda^2 / (sigma^2 + lambda^2)
-per iteration, so 100 iterations cannot reach 1e-5 where sigma_min is much below this."""
+per iteration, so 100 iterations could not reach 1e-5 where sigma_min is much below this; the
+error-scaled damping (IKParams.damping_scale) is what makes near-singular targets converge."""
 
 
 def _ik_round_trip(rig, n: int, seed: int):
@@ -229,32 +237,31 @@ def _check_round_trip(rig, n: int, seed: int, min_rate: float) -> None:
     rate_good = ok[good].mean()
     assert good.sum() >= 0.5 * n
     assert rate_good >= min_rate, f"{rig.name}: {rate_good:.3f} of {good.sum()} well-conditioned targets"
+    assert ok.mean() >= min_rate, f"{rig.name}: {ok.mean():.3f} of all {n} targets"
 
 
 def test_ik_round_trip_full_pose(rig):
-    _check_round_trip(rig, 300, seed=21, min_rate=0.99)
-
-
-@pytest.mark.expensive
-def test_ik_round_trip_full_pose_1000(rig):
-    _check_round_trip(rig, 1000, seed=22, min_rate=0.99)
+    """1,000 random poses, seeds within +-0.2 rad per joint (about 1.5 s per robot)."""
+    _check_round_trip(rig, 1000, seed=21, min_rate=0.99)
 
 
 def test_ik_unreachable_target_reports_failure(rig):
     kin = rig.kin
     base = np.asarray(rig.spec.base_position)
     rng = np.random.default_rng(31)
+    dh = rig.spec.dh
+    reach = sum(map(abs, dh.a)) + sum(map(abs, dh.d)) + rig.spec.tool.length  # bound on |tip - base|
     for direction in ([1.0, 0.0, 0.0], [0.0, -1.0, 0.3], [0.3, 0.4, 1.0]):
         d = np.asarray(direction) / np.linalg.norm(direction)
         target = base + 3.0 * d
         start = rig.random_q(rng)
         result = kin.ik(target, None, start, IKParams())
         assert not result.converged
-        assert result.position_error > 1.0
+        assert result.position_error >= 3.0 - reach - 1e-9 > 0.3
         assert result.position_error == pytest.approx(np.linalg.norm(kin.fk(result.q)[:3, 3] - target))
         assert np.all(result.q >= kin.lower) and np.all(result.q <= kin.upper)
         result6 = kin.ik(target, np.eye(3), start, IKParams())
-        assert not result6.converged and result6.position_error > 1.0
+        assert not result6.converged and result6.position_error >= 3.0 - reach - 1e-9
         assert np.all(result6.q >= kin.lower) and np.all(result6.q <= kin.upper)
 
 
@@ -296,3 +303,24 @@ def test_ik_moves_towards_the_target_not_away():
     result = kin.ik(target[:3, 3], target[:3, :3], q, IKParams(max_iterations=1))
     assert result.iterations == 1
     assert result.position_error < 0.5 * before
+
+
+@pytest.mark.parametrize("scale", [None, 0.05])
+def test_ik_iteration_is_algorithm_1_update(scale):
+    """One iteration equals q + dint * J^T (J J^T + lambda^2 I)^-1 (x_d - x_c) / ddif, with the
+    paper's constant lambda (scale None) or lambda^2 * ||x_e|| / scale below the scale."""
+    from rayreach.robots import get_robot
+    from rayreach.transforms import matrix_to_rotvec
+
+    kin = Kinematics(get_robot("kr16"))
+    q = np.asarray(kin.spec.home)
+    target = kin.fk(q + 0.01)
+    params = IKParams(damping=0.05, delta_int=0.02, delta_dif=0.01, damping_scale=scale, max_iterations=1)
+    current = kin.fk(q)
+    error = np.concatenate((target[:3, 3] - current[:3, 3], matrix_to_rotvec(target[:3, :3] @ current[:3, :3].T)))
+    lam2 = 0.05**2 if scale is None else 0.05**2 * np.linalg.norm(error) / scale
+    assert np.linalg.norm(error) < 0.05  # the scaled branch is the one exercised
+    jac = kin.jacobian(kin.frames(q))
+    expected = q + 0.02 * jac.T @ np.linalg.solve(jac @ jac.T + lam2 * np.eye(6), error / 0.01)
+    result = kin.ik(target[:3, 3], target[:3, :3], q, params)
+    np.testing.assert_allclose(result.q, expected, atol=1e-12)

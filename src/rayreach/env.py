@@ -74,9 +74,9 @@ class EnvConfig:
     ray_backend: str = "auto"
     """``auto`` (numpy when every obstacle is a primitive), ``numpy`` or ``bullet``."""
     ray_range: float = RAY_RANGE
-    ik: IKParams = IKParams(damping=0.02, tolerance=1e-4, max_iterations=10)
-    """IK per step: 0.1 mm is ample for a 5 mm step, and with damping 0.02 one iteration nearly
-    always reaches it (0.05 needs two); an unconverged step still moves (``info["ik_converged"]``)."""
+    ik: IKParams = IKParams(tolerance=1e-4, max_iterations=10)
+    """IK per step: 0.1 mm is ample for a 5 mm step, which one iteration nearly always reaches
+    (the damping shrinks for small errors); an unconverged step still moves (``info["ik_converged"]``)."""
     rewards: R.RewardWeights = R.RewardWeights()
     random_world: RandomWorldConfig = field(default_factory=RandomWorldConfig)
 
@@ -87,6 +87,17 @@ class EnvConfig:
             raise ValueError(f"max_steps must be >= 1, got {self.max_steps}")
         if not self.control_period > 0:
             raise ValueError(f"control_period must be positive, got {self.control_period}")
+
+
+def observation_space(spec: RobotSpec, workspace_size: np.ndarray) -> gym.spaces.Box:
+    """Finite bounds: joint limits; the goal offset and distance within the workspace (plus
+    the one step that may leave it); Euler angles; ray fractions in [0, 1]."""
+    reach = workspace_size + 2 * spec.ee_step
+    low = np.concatenate((spec.lower_array, -reach, [-np.pi, -np.pi / 2, -np.pi], [0.0], np.zeros(N_RAYS)))
+    high = np.concatenate(
+        (spec.upper_array, reach, [np.pi, np.pi / 2, np.pi], [np.linalg.norm(reach)], np.ones(N_RAYS))
+    )
+    return gym.spaces.Box(low.astype(np.float32), high.astype(np.float32), dtype=np.float32)
 
 
 def make_config(config: EnvConfig | None, overrides: dict[str, Any]) -> EnvConfig:
@@ -134,10 +145,9 @@ class ReachEnv(gym.Env):
         self.n_obstacles = self.config.random_world.n_obstacles
 
         self.action_space = gym.spaces.Box(-1.0, 1.0, (6,), dtype=np.float32)
-        low = np.full(OBS_SIZE, -np.inf, dtype=np.float32)
-        high = np.full(OBS_SIZE, np.inf, dtype=np.float32)
-        low[N_ROBOT_OBS:], high[N_ROBOT_OBS:] = 0.0, 1.0
-        self.observation_space = gym.spaces.Box(low, high, dtype=np.float32)
+        ws_low = np.asarray(fixed.workspace_low if fixed else self.spec_robot.workspace_low)
+        ws_high = np.asarray(fixed.workspace_high if fixed else self.spec_robot.workspace_high)
+        self.observation_space = observation_space(self.spec_robot, ws_high - ws_low)
         self._step_scale = np.array([self.spec_robot.ee_step] * 3 + [self.spec_robot.rot_step] * 3)
 
         self.scenario: Scenario | None = None

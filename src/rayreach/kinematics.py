@@ -28,6 +28,10 @@ class IKParams:
 
     damping: float = 0.05
     """lambda: trades accuracy for bounded joint steps near singularities."""
+    damping_scale: float | None = 0.05
+    """Below this error norm, lambda^2 shrinks in proportion (lambda^2 * ||x_e|| / scale), so the
+    last iterations become Gauss-Newton steps and converge fast even at singular targets; far
+    from the target lambda is the paper's constant. None: constant lambda throughout."""
     delta_int: float = 0.01
     """Integration step Delta_int."""
     delta_dif: float = 0.01
@@ -157,12 +161,16 @@ class Kinematics:
             q, frames = np.asarray(q_start, dtype=float), start_frames
         gain = params.delta_int / params.delta_dif
         rows = 3 if position_only else 6
-        eye = self._eye[rows] * params.damping**2
+        eye = self._eye[rows]
+        damping2 = params.damping**2
+        scale = params.damping_scale
         error = self._pose_error(frames, target_position, target_rotation)
+        norm = float(np.sqrt(error @ error))
         iterations = 0
         while True:  # do ... while ||x_e|| > epsilon
             jac = self.jacobian(frames)[:rows]
-            qdot = jac.T @ np.linalg.solve(jac @ jac.T + eye, error)
+            lam2 = damping2 if scale is None or norm >= scale else damping2 * norm / scale
+            qdot = jac.T @ np.linalg.solve(jac @ jac.T + lam2 * eye, error)
             q = np.minimum(np.maximum(q + gain * qdot, lower), upper)
             frames = self.frames(q)
             error = self._pose_error(frames, target_position, target_rotation)

@@ -80,8 +80,8 @@ def matrix_to_rotvec(rot: np.ndarray) -> np.ndarray:
     angle = math.acos(cos)
     if angle < math.pi - 1e-4:
         return (angle / (2.0 * math.sin(angle))) * vee
-    # near pi: the axis is the dominant column of (R + I) / 2 = k k^T (sign from vee)
-    sym = (rot + np.eye(3)) / 2.0
+    # near pi: the symmetric part of R is cos I + (1 - cos) k k^T; take k from its dominant column
+    sym = ((rot + rot.T) / 2.0 - cos * np.eye(3)) / (1.0 - cos)
     i = int(np.argmax(np.diag(sym)))
     axis = sym[:, i] / math.sqrt(max(sym[i, i], 1e-300))
     if axis @ vee < 0:

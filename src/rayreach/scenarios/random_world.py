@@ -92,7 +92,8 @@ class RandomWorlds:
             obstacles: list[ObstacleSpec] = []
             kinds = [str(k) for k in rng.choice(self.kinds, size=n)] if n and self.kinds else []
             if "shelf" in kinds:  # at most one shelf; the goal goes into one of its compartments
-                kinds = [k for k in kinds if k != "shelf"]
+                others = [k for k in self.kinds if k != "shelf"]
+                kinds = [str(k) for k in rng.choice(others, size=n - 1)] if others else []
                 boxes, goal = self._shelf(rng, start)
                 obstacles += boxes
             else:
