@@ -161,10 +161,23 @@ def _first_hit(t_near: np.ndarray, t_far: np.ndarray) -> np.ndarray:
 
 
 class NumpyCaster:
-    """Analytic ray casting against boxes, spheres and cylinders, all rays at once."""
+    """Analytic ray casting against boxes, spheres and cylinders, all rays at once.
+
+    Rays are brought into the obstacles' frames with one matrix product per shape class and
+    handled as (3, obstacles, rays) component planes: numpy is slow at broadcasting and
+    reducing over a trailing axis of length 3, which would otherwise dominate.
+    """
 
     def __init__(self, primitives: PrimitiveSet) -> None:
         self.primitives = primitives
+        # rotations are fixed (moving obstacles only translate): stack R_k^T row blocks so
+        # that (stack @ v) lists component i of R_k^T v at row i * K + k
+        self._box_rt = self._stack(primitives.box_rot)
+        self._cyl_rt = self._stack(primitives.cyl_rot)
+
+    @staticmethod
+    def _stack(rot: np.ndarray) -> np.ndarray:
+        return np.ascontiguousarray(rot.transpose(2, 0, 1).reshape(-1, 3))
 
     def cast(self, origins: np.ndarray, directions: np.ndarray, ray_range: float) -> np.ndarray:
         prim = self.primitives
@@ -177,45 +190,54 @@ class NumpyCaster:
             best = np.minimum(best, self._cylinders(origins, directions).min(axis=0))
         return np.minimum(best / ray_range, 1.0)
 
-    def _local(self, pos: np.ndarray, rot: np.ndarray, origins: np.ndarray, directions: np.ndarray):
-        """Rays in each obstacle's frame, (k, n, 3): row vectors times R is R^T applied."""
-        o = np.matmul(origins[None, :, :] - pos[:, None, :], rot)
-        d = np.matmul(directions[None, :, :], rot)
+    @staticmethod
+    def _local(stack: np.ndarray, rot: np.ndarray, pos: np.ndarray, origins: np.ndarray, directions: np.ndarray):
+        """Ray origins and directions in each obstacle's frame as (3, K, n) planes."""
+        k = len(pos)
+        centre = np.einsum("kji,kj->ik", rot, pos)[:, :, None]  # R_k^T p_k, (3, K, 1)
+        o = (stack @ origins.T).reshape(3, k, -1) - centre
+        d = (stack @ directions.T).reshape(3, k, -1)
         return o, d
 
     def _boxes(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
         prim = self.primitives
-        o, d = self._local(prim.box_pos, prim.box_rot, origins, directions)
-        half = prim.box_half[:, None, :]
-        safe = np.where(np.abs(d) < 1e-300, 1e-300, d)
-        inv = 1.0 / safe
-        t1 = (-half - o) * inv
-        t2 = (half - o) * inv
-        t_near = np.minimum(t1, t2).max(axis=2)
-        t_far = np.maximum(t1, t2).min(axis=2)
+        o, d = self._local(self._box_rt, prim.box_rot, prim.box_pos, origins, directions)
+        half = prim.box_half.T[:, :, None]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            inv = 1.0 / d  # +-inf for rays parallel to a slab; fmin/fmax skip the 0 * inf NaNs
+            t1 = (-half - o) * inv
+            t2 = (half - o) * inv
+        lo, hi = np.fmin(t1, t2), np.fmax(t1, t2)
+        t_near = np.fmax(np.fmax(lo[0], lo[1]), lo[2])
+        t_far = np.fmin(np.fmin(hi[0], hi[1]), hi[2])
         return _first_hit(t_near, t_far)
 
     def _spheres(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
         prim = self.primitives
-        oc = origins[None, :, :] - prim.sphere_pos[:, None, :]
-        b = np.einsum("knj,nj->kn", oc, directions)
-        c = np.einsum("knj,knj->kn", oc, oc) - prim.sphere_radius[:, None] ** 2
+        centres = prim.sphere_pos
+        # |o + t d - c|^2 = r^2 with |d| = 1: t^2 + 2 b t + c' = 0
+        b = np.einsum("nj,nj->n", origins, directions)[None, :] - centres @ directions.T
+        oc2 = (
+            np.einsum("nj,nj->n", origins, origins)[None, :]
+            - 2.0 * centres @ origins.T
+            + np.einsum("kj,kj->k", centres, centres)[:, None]
+        )
+        c = oc2 - prim.sphere_radius[:, None] ** 2
         disc = b * b - c
         root = np.sqrt(np.maximum(disc, 0.0))
-        t_near, t_far = -b - root, -b + root
-        t_near = np.where(disc >= 0.0, t_near, _BIG)
-        t_far = np.where(disc >= 0.0, t_far, -_BIG)
+        t_near = np.where(disc >= 0.0, -b - root, _BIG)
+        t_far = np.where(disc >= 0.0, -b + root, -_BIG)
         return _first_hit(t_near, t_far)
 
     def _cylinders(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
         prim = self.primitives
-        o, d = self._local(prim.cyl_pos, prim.cyl_rot, origins, directions)
+        o, d = self._local(self._cyl_rt, prim.cyl_rot, prim.cyl_pos, origins, directions)
         r = prim.cyl_radius[:, None]
         h = prim.cyl_half_height[:, None]
         # infinite cylinder x^2 + y^2 <= r^2
-        a = d[..., 0] ** 2 + d[..., 1] ** 2
-        b = o[..., 0] * d[..., 0] + o[..., 1] * d[..., 1]
-        c = o[..., 0] ** 2 + o[..., 1] ** 2 - r**2
+        a = d[0] ** 2 + d[1] ** 2
+        b = o[0] * d[0] + o[1] * d[1]
+        c = o[0] ** 2 + o[1] ** 2 - r**2
         disc = b * b - a * c
         parallel = a < 1e-12
         root = np.sqrt(np.maximum(disc, 0.0))
@@ -226,11 +248,11 @@ class NumpyCaster:
         side_near = np.where(missing, _BIG, side_near)
         side_far = np.where(missing, -_BIG, side_far)
         # slab |z| <= h
-        dz = np.where(np.abs(d[..., 2]) < 1e-300, 1e-300, d[..., 2])
-        z1 = (-h - o[..., 2]) / dz
-        z2 = (h - o[..., 2]) / dz
-        t_near = np.maximum(side_near, np.minimum(z1, z2))
-        t_far = np.minimum(side_far, np.maximum(z1, z2))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            z1 = (-h - o[2]) / d[2]
+            z2 = (h - o[2]) / d[2]
+        t_near = np.fmax(side_near, np.fmin(z1, z2))
+        t_far = np.fmin(side_far, np.fmax(z1, z2))
         return _first_hit(t_near, t_far)
 
 
