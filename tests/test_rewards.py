@@ -174,3 +174,12 @@ def test_shake_counter_reset():
     counter.reset()
     assert len(counter.queue) == 0
     assert counter.update(0.4) == 0
+
+
+def test_progress_term_is_off_by_default_and_rewards_getting_closer():
+    from rayreach.rewards import RewardWeights, progress_reward
+
+    assert progress_reward(0.30, 0.25) == 0.0
+    w = RewardWeights(progress=10.0)
+    assert progress_reward(0.30, 0.25, w) == pytest.approx(0.5)
+    assert progress_reward(0.25, 0.30, w) == pytest.approx(-0.5)

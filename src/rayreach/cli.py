@@ -40,6 +40,27 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument("--json", action="store_true", help="print one JSON line")
     bench.add_argument("--breakdown", action="store_true", help="also time each part of a step (us per call)")
 
+    train = sub.add_parser("train", help="train a PPO policy on random worlds (resumable)")
+    train.add_argument("--robot", required=True, help="ur5 or kr16")
+    train.add_argument("--timesteps", type=int, default=2_000_000, help="total environment steps")
+    train.add_argument("--envs", type=int, default=32, help="environments stepped in parallel")
+    train.add_argument("--workers", type=int, default=None, help="worker processes (default: CPU cores)")
+    train.add_argument("--out", required=True, help="run directory, e.g. runs/ur5")
+    train.add_argument("--resume", action="store_true", help="continue the checkpoint in --out")
+    train.add_argument("--seed", type=int, default=0)
+    train.add_argument("--checkpoint-every", type=int, default=100_000, help="steps between checkpoints")
+    train.add_argument("--progress-weight", type=float, default=None,
+                       help="weight of the progress reward term (0: the paper's reward alone)")
+
+    roll = sub.add_parser("rollout", help="run a saved policy and report success, collisions, path length")
+    roll.add_argument("--model", required=True, help="a model or checkpoint .zip")
+    _scenario_arg(roll)
+    roll.add_argument("--episodes", type=int, default=10)
+    roll.add_argument("--stochastic", action="store_true", help="sample actions instead of the mean")
+    roll.add_argument("--tolerance", type=float, default=0.01, help="goal tolerance, m (paper: 0.01)")
+    roll.add_argument("--obstacles", type=int, default=None, help="obstacles per random world")
+    roll.add_argument("--json", action="store_true", help="print one JSON line")
+
     demo = sub.add_parser("demo", help="a scripted episode on exp1, drawn to a PNG")
     demo.add_argument("--scenario", default="exp1")
     demo.add_argument("--out", default="demo", help="output directory")
@@ -58,6 +79,13 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _bench(args)
         if args.command == "demo":
             return _demo(args)
+        if args.command == "train":
+            return _train(args, argv)
+        if args.command == "rollout":
+            return _rollout(args, _pick_scenario(args, parser))
+    except KeyboardInterrupt as exc:
+        print(f"rayreach {args.command}: {exc or 'interrupted'}", file=sys.stderr)
+        return 130
     except (ScenarioError, ValueError, FileNotFoundError) as exc:
         print(f"rayreach {args.command}: {exc}", file=sys.stderr)
         return 2
@@ -108,6 +136,40 @@ def _bench(args: argparse.Namespace) -> int:
     print(f"speedup of numpy over rayTestBatch: {record['speedup']:.2f}x ({result.steps} steps each)")
     for part, us in record.get("us_per_call", {}).items():
         print(f"{part:>22}: {us:7.1f} us")
+    return 0
+
+
+def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
+    from dataclasses import replace
+
+    from rayreach.robots import get_robot
+    from rayreach.train import TrainConfig, train
+
+    robot = get_robot(args.robot).name
+    config = TrainConfig(robot=robot, timesteps=args.timesteps, envs=args.envs, seed=args.seed,
+                         checkpoint_every=args.checkpoint_every)
+    if args.workers is not None:
+        config = replace(config, workers=args.workers)
+    if args.progress_weight is not None:
+        config = replace(config, progress_weight=args.progress_weight)
+    command = "rayreach " + " ".join(sys.argv[1:] if argv is None else argv)
+    path = train(config, args.out, resume=args.resume, command=command)
+    print(f"model: {path}")
+    return 0
+
+
+def _rollout(args: argparse.Namespace, scenario: str) -> int:
+    from rayreach.rollout import rollout
+
+    summary = rollout(args.model, scenario, episodes=args.episodes, deterministic=not args.stochastic,
+                      goal_tolerance=args.tolerance, n_obstacles=args.obstacles, progress=not args.json)
+    if args.json:
+        print(json.dumps({"scenario": scenario, **summary.to_dict()}))
+        return 0
+    mode = "deterministic" if summary.deterministic else "stochastic"
+    print(f"{scenario}: {summary.episodes} episodes ({mode}), success {summary.success_rate:.1%}, "
+          f"collisions {summary.collision_rate:.1%}, mean path {summary.path_length_mean:.3f} m, "
+          f"mean steps {summary.steps_mean:.0f}")
     return 0
 
 

@@ -29,7 +29,8 @@ A NaN or infinite action raises ``ValueError`` and changes nothing.
 success +10 when the distance is below ``goal_tolerance`` (the episode ends at the last goal;
 earlier goals of a sequence switch to the next one), collision -10 (ends), distance
 -0.01 d, leaving the workspace -10 (ends), step budget ``max_steps`` used up -5 (truncated),
-shaking -0.005 n_s. ``info`` carries every term (``reward_terms``), ``distance``,
+shaking -0.005 n_s; plus an optional progress term (weight 0 by default, as in the paper).
+``info`` carries every term (``reward_terms``), ``distance``,
 ``is_success``, ``collision``, ``out_of_bounds``, ``ee_position`` and ``goal``.
 
 ## Time
@@ -203,6 +204,7 @@ class ReachEnv(gym.Env):
         self._shake.reset()
         self._ready = True
         distance = float(np.linalg.norm(self.goals[0] - self.ee_pos))
+        self._previous_distance = distance
         info = {"distance": distance, "ee_position": self.ee_pos.copy(), "goal": self.goals[0].copy(),
                 "is_success": False}
         return self._observation(distance), info
@@ -245,6 +247,7 @@ class ReachEnv(gym.Env):
             "shaking": R.shaking_reward(n_shakes, w),
             "out_of_bounds": R.out_of_bounds_reward(outside, w),
             "exhausted": 0.0,
+            "progress": R.progress_reward(self._previous_distance, distance, w),
         }
         final_goal = self.goal_index == len(self.goals) - 1
         success = reached and final_goal
@@ -256,6 +259,7 @@ class ReachEnv(gym.Env):
             self.goal_index += 1
             self._shake.reset()
             distance = float(np.linalg.norm(self.goals[self.goal_index] - self.ee_pos))
+        self._previous_distance = distance
         if terminated or truncated:
             self._ready = False
         info = {

@@ -23,6 +23,8 @@ class RewardWeights:
     """r_e when the step budget is used up (the episode is truncated)."""
     shaking: float = -0.005
     """r_shake = shaking * n_s."""
+    progress: float = 0.0
+    """Not in the paper (0 there): progress * (d_{t-1} - d_t), a dense term for training."""
 
 
 def success_reward(distance: float, tolerance: float, w: RewardWeights = RewardWeights()) -> float:
@@ -47,6 +49,10 @@ def exhausted_reward(exhausted: bool, w: RewardWeights = RewardWeights()) -> flo
 
 def shaking_reward(n_shakes: int, w: RewardWeights = RewardWeights()) -> float:
     return w.shaking * n_shakes
+
+
+def progress_reward(previous_distance: float, distance: float, w: RewardWeights = RewardWeights()) -> float:
+    return w.progress * (previous_distance - distance)
 
 
 def count_uneven_movements(distances: list[float] | deque[float]) -> int:

@@ -18,7 +18,11 @@ from rayreach.scenarios.schema import ObstacleSpec, Scenario, StartSpec
 from rayreach.scene import Scene
 from rayreach.transforms import rpy_to_matrix
 
-KINDS = ("plate", "moving_plate", "box", "sphere", "shelf")
+KINDS = ("plate", "moving_plate", "box", "sphere", "shelf", "goal_cover", "goal_wall")
+"""plate / moving_plate: upright or flat plates across the straight path (moving sideways);
+box, sphere: clutter near the path; shelf: a 2 x 2 shelf holding the goal; goal_cover: a flat
+plate over the goal, high enough for the tool to pass under, or low and moving away (as in
+exp3); goal_wall: an upright plate beside the goal."""
 
 
 @dataclass(frozen=True)
@@ -104,10 +108,13 @@ class RandomWorlds:
             q_goal = goal_configuration(self.kin, goal, q_start, rng, n_random_seeds=2)
             if q_goal is None:
                 continue
-            self.scene.set_obstacles(obstacles)
+            # the goal configuration must be free of static obstacles (moving ones pass by);
+            # the start configuration must be free at t = 0
+            self.scene.set_obstacles([o for o in obstacles if not o.moving])
             self.scene.set_joints(q_goal)
             if self.scene.in_collision():
                 continue
+            self.scene.set_obstacles(obstacles)
             self.scene.set_joints(q_start)
             if self.scene.in_collision():
                 continue
@@ -160,6 +167,24 @@ class RandomWorlds:
                 travel = float(rng.uniform(0.1, 0.3))
             return ObstacleSpec("box", centre, rpy=rpy, half_extents=half, velocity=velocity, travel=travel,
                                 name=f"{kind}_{index}")
+        if kind == "goal_cover":
+            half = (0.05 * scale, 0.05 * scale, 0.002)
+            if rng.random() < 0.5:  # static, above the tool's length: reach in from the side
+                lift = float(rng.uniform(0.16, 0.22))
+                return ObstacleSpec("box", (float(goal[0]), float(goal[1]), float(goal[2]) + lift), half_extents=half,
+                                    name=f"goal_cover_{index}")
+            lift = float(rng.uniform(0.04, 0.07))
+            direction = float(rng.uniform(0, 2 * math.pi))
+            speed = float(rng.uniform(*self.config.speed))
+            return ObstacleSpec("box", (float(goal[0]), float(goal[1]), float(goal[2]) + lift), half_extents=half,
+                                velocity=(speed * math.cos(direction), speed * math.sin(direction), 0.0),
+                                name=f"goal_cover_{index}")
+        if kind == "goal_wall":
+            side = float(rng.uniform(0, 2 * math.pi))
+            gap = float(rng.uniform(0.04, 0.08))
+            centre = (float(goal[0] + gap * math.cos(side)), float(goal[1] + gap * math.sin(side)), float(goal[2]) + 0.01)
+            return ObstacleSpec("box", centre, rpy=(0.0, 0.0, side), half_extents=(0.002, 0.1 * scale, 0.05 * scale),
+                                name=f"goal_wall_{index}")
         if kind == "box":
             half = tuple(float(v) for v in rng.uniform(0.02, 0.05, 3))
             return ObstacleSpec("box", centre, rpy=(0.0, 0.0, float(rng.uniform(0, math.pi))), half_extents=half,

@@ -1,0 +1,127 @@
+"""Training curricula: the paper's augmented goal size and an obstacle count that follows success.
+
+Both are plain state machines fed with episode outcomes; the trainer keeps one instance of
+each for all its environments together and pushes their values to every environment.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+
+@dataclass(frozen=True)
+class GoalSizeParams:
+    """Paper table "Parameters for augmented target size"."""
+
+    rho: float = 0.1
+    """rho: the size used for the first e_zeta episodes. The paper does not give it; starting
+    "larger than life" at rho_max is the reading that matches its text."""
+    rho_max: float = 0.1
+    rho_min: float = 0.01
+    delta_plus: float = 0.001
+    delta_minus: float = 0.01
+    e_zeta: int = 1000
+    p_zeta: float = 0.9
+    k: int = 50
+
+
+def next_goal_size(previous: float, episode: int, eta: float, p: GoalSizeParams) -> float:
+    """rho~(e) from rho~(e-1), the episode index e and eta(k, e) (paper eq. "augmented size").
+
+    The paper's conditions on rho~(e) are read as conditions on rho~(e-1) (the value being
+    updated); a step never leaves [rho_min, rho_max].
+    """
+    if episode < p.e_zeta:
+        return p.rho
+    if eta < p.p_zeta and previous < p.rho_max:
+        return min(previous + p.delta_plus, p.rho_max)
+    if eta >= p.p_zeta and previous > p.rho_min:
+        return max(previous - p.delta_minus, p.rho_min)
+    if eta == 1.0 and previous == p.rho:
+        return p.rho
+    return previous
+
+
+@dataclass
+class AugmentedGoalSize:
+    """rho~ across all environments: one episode counter e and one window of S_e."""
+
+    params: GoalSizeParams = field(default_factory=GoalSizeParams)
+    size: float = -1.0
+    episode: int = 0
+    window: deque = field(default_factory=deque)
+
+    def __post_init__(self) -> None:
+        if self.size < 0:
+            self.size = self.params.rho
+        self.window = deque(self.window, maxlen=self.params.k)
+
+    def eta(self) -> float:
+        """eta(k, e): successes among the last k episodes, over k (fewer at the start)."""
+        return sum(self.window) / self.params.k
+
+    def record(self, success: bool) -> float:
+        """Feed S_e of the episode that just ended; returns rho~ for the next episode."""
+        self.window.append(1 if success else 0)
+        self.episode += 1
+        self.size = next_goal_size(self.size, self.episode, self.eta(), self.params)
+        return self.size
+
+    def state(self) -> dict[str, Any]:
+        return {"size": self.size, "episode": self.episode, "window": list(self.window), "params": asdict(self.params)}
+
+    @classmethod
+    def from_state(cls, state: dict[str, Any]) -> "AugmentedGoalSize":
+        return cls(GoalSizeParams(**state["params"]), state["size"], state["episode"], deque(state["window"]))
+
+
+@dataclass(frozen=True)
+class ObstacleParams:
+    """Obstacle curriculum: after every ``window`` episodes at the current count, the count
+    goes up by one if the success rate was at least ``raise_at`` and down by one if it was
+    below ``lower_at``; it stays within [minimum, maximum]."""
+
+    start: int = 0
+    minimum: int = 0
+    maximum: int = 3
+    window: int = 200
+    raise_at: float = 0.8
+    lower_at: float = 0.3
+
+
+@dataclass
+class ObstacleCurriculum:
+    params: ObstacleParams = field(default_factory=ObstacleParams)
+    count: int = -1
+    successes: int = 0
+    episodes: int = 0
+
+    def __post_init__(self) -> None:
+        if self.count < 0:
+            self.count = self.params.start
+
+    def record(self, success: bool, may_raise: bool = True) -> int:
+        """Feed one episode's outcome; returns the obstacle count for the next episodes.
+
+        ``may_raise=False`` holds the count (the trainer passes it while the augmented goal
+        is larger than the true one: success there says little about the real task)."""
+        self.episodes += 1
+        self.successes += int(success)
+        p = self.params
+        if self.episodes >= p.window:
+            rate = self.successes / self.episodes
+            if rate >= p.raise_at and self.count < p.maximum and may_raise:
+                self.count += 1
+            elif rate < p.lower_at and self.count > p.minimum:
+                self.count -= 1
+            self.successes = self.episodes = 0
+        return self.count
+
+    def state(self) -> dict[str, Any]:
+        return {"count": self.count, "successes": self.successes, "episodes": self.episodes, "params": asdict(self.params)}
+
+    @classmethod
+    def from_state(cls, state: dict[str, Any]) -> "ObstacleCurriculum":
+        return cls(ObstacleParams(**state["params"]), state["count"], state["successes"], state["episodes"])

@@ -1,0 +1,87 @@
+"""Run a saved policy on a scenario and summarise what it did."""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from rayreach.env import ReachEnv
+from rayreach.policy import CheckpointError, load_policy
+from rayreach.scenarios import RANDOM
+
+EVAL_SEED_OFFSET = 1_000_000
+"""Random-world rollouts draw seeds from here on; training uses seeds below it."""
+
+
+@dataclass
+class RolloutSummary:
+    episodes: int
+    success_rate: float
+    collision_rate: float
+    path_length_mean: float
+    """Mean end-effector path length of successful episodes, m (NaN if none)."""
+    steps_mean: float
+    successes: int
+    collisions: int
+    deterministic: bool
+    per_episode: list[dict] = field(default_factory=list)
+
+    def to_dict(self, with_episodes: bool = False) -> dict:
+        data = asdict(self)
+        if not with_episodes:
+            data.pop("per_episode")
+        return {k: (None if isinstance(v, float) and v != v else v) for k, v in data.items()}  # NaN -> null
+
+
+def rollout(
+    model: str | Path,
+    scenario: str,
+    episodes: int = 10,
+    deterministic: bool = True,
+    goal_tolerance: float = 0.01,
+    n_obstacles: int | None = None,
+    seed: int = EVAL_SEED_OFFSET,
+    progress: bool = True,
+) -> RolloutSummary:
+    """``episodes`` episodes of the policy at ``goal_tolerance``. Random worlds use the
+    final obstacle count of training unless ``n_obstacles`` is given."""
+    policy = load_policy(model)
+    env = ReachEnv(robot=policy.robot, scenario=scenario, goal_tolerance=goal_tolerance)
+    if env.spec_robot.name != policy.robot:
+        raise CheckpointError(f"{model} controls a {policy.robot}, but scenario '{scenario}' uses a {env.spec_robot.name}")
+    if scenario == RANDOM:
+        trained = policy.meta.get("state", {}).get("obstacles", {}).get("count", 0)
+        env.set_n_obstacles(trained if n_obstacles is None else n_obstacles)
+    records = []
+    try:
+        for episode in tqdm(range(episodes), desc=f"rollout {scenario}", disable=not progress, leave=False):
+            obs, info = env.reset(seed=seed + episode)
+            path = [info["ee_position"]]
+            done = False
+            while not done:
+                obs, _, terminated, truncated, info = env.step(policy.act(obs, deterministic))
+                path.append(info["ee_position"])
+                done = terminated or truncated
+            length = float(np.linalg.norm(np.diff(np.asarray(path), axis=0), axis=1).sum())
+            records.append({"success": bool(info["is_success"]), "collision": bool(info["collision"]),
+                            "out_of_bounds": bool(info["out_of_bounds"]), "steps": len(path) - 1,
+                            "path_length": length})
+    finally:
+        env.close()
+    successes = sum(r["success"] for r in records)
+    collisions = sum(r["collision"] for r in records)
+    lengths = [r["path_length"] for r in records if r["success"]]
+    return RolloutSummary(
+        episodes=episodes,
+        success_rate=successes / episodes,
+        collision_rate=collisions / episodes,
+        path_length_mean=float(np.mean(lengths)) if lengths else float("nan"),
+        steps_mean=float(np.mean([r["steps"] for r in records])),
+        successes=successes,
+        collisions=collisions,
+        deterministic=deterministic,
+        per_episode=records,
+    )
