@@ -183,3 +183,13 @@ def test_progress_term_is_off_by_default_and_rewards_getting_closer():
     w = RewardWeights(progress=10.0)
     assert progress_reward(0.30, 0.25, w) == pytest.approx(0.5)
     assert progress_reward(0.25, 0.30, w) == pytest.approx(-0.5)
+
+
+def test_proximity_term_is_off_by_default_and_grows_towards_contact():
+    from rayreach.rewards import RewardWeights, proximity_reward
+
+    assert proximity_reward(0.0) == 0.0
+    w = RewardWeights(proximity=-0.1, proximity_range=0.25)
+    assert proximity_reward(1.0, w) == 0.0 and proximity_reward(0.25, w) == 0.0
+    assert proximity_reward(0.125, w) == pytest.approx(-0.05)
+    assert proximity_reward(0.0, w) == pytest.approx(-0.1)

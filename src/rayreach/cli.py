@@ -51,6 +51,8 @@ def build_parser() -> argparse.ArgumentParser:
     train.add_argument("--checkpoint-every", type=int, default=100_000, help="steps between checkpoints")
     train.add_argument("--progress-weight", type=float, default=None,
                        help="weight of the progress reward term (0: the paper's reward alone)")
+    train.add_argument("--proximity-weight", type=float, default=None,
+                       help="weight of the proximity reward term (0: the paper's reward alone)")
 
     roll = sub.add_parser("rollout", help="run a saved policy and report success, collisions, path length")
     roll.add_argument("--model", required=True, help="a model or checkpoint .zip")
@@ -60,6 +62,10 @@ def build_parser() -> argparse.ArgumentParser:
     roll.add_argument("--tolerance", type=float, default=0.01, help="goal tolerance, m (paper: 0.01)")
     roll.add_argument("--obstacles", type=int, default=None, help="obstacles per random world")
     roll.add_argument("--json", action="store_true", help="print one JSON line")
+
+    export = sub.add_parser("export", help="copy a run's model (or latest checkpoint) to a shipped file + JSON")
+    export.add_argument("--run", required=True, help="run directory or bundle .zip")
+    export.add_argument("--to", required=True, help="target .zip, e.g. models/ur5.zip")
 
     demo = sub.add_parser("demo", help="a scripted episode on exp1, drawn to a PNG")
     demo.add_argument("--scenario", default="exp1")
@@ -81,6 +87,12 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _demo(args)
         if args.command == "train":
             return _train(args, argv)
+        if args.command == "export":
+            from rayreach.policy import export_bundle
+
+            for path in export_bundle(args.run, args.to):
+                print(f"wrote {path}")
+            return 0
         if args.command == "rollout":
             return _rollout(args, _pick_scenario(args, parser))
     except KeyboardInterrupt as exc:
@@ -152,6 +164,8 @@ def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
         config = replace(config, workers=args.workers)
     if args.progress_weight is not None:
         config = replace(config, progress_weight=args.progress_weight)
+    if args.proximity_weight is not None:
+        config = replace(config, proximity_weight=args.proximity_weight)
     command = "rayreach " + " ".join(sys.argv[1:] if argv is None else argv)
     path = train(config, args.out, resume=args.resume, command=command)
     print(f"model: {path}")

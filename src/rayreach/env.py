@@ -29,7 +29,8 @@ A NaN or infinite action raises ``ValueError`` and changes nothing.
 success +10 when the distance is below ``goal_tolerance`` (the episode ends at the last goal;
 earlier goals of a sequence switch to the next one), collision -10 (ends), distance
 -0.01 d, leaving the workspace -10 (ends), step budget ``max_steps`` used up -5 (truncated),
-shaking -0.005 n_s; plus an optional progress term (weight 0 by default, as in the paper).
+shaking -0.005 n_s; plus optional progress and proximity terms for training (weight 0 by
+default, as in the paper).
 ``info`` carries every term (``reward_terms``), ``distance``,
 ``is_success``, ``collision``, ``out_of_bounds``, ``ee_position`` and ``goal``.
 
@@ -207,7 +208,7 @@ class ReachEnv(gym.Env):
         self._previous_distance = distance
         info = {"distance": distance, "ee_position": self.ee_pos.copy(), "goal": self.goals[0].copy(),
                 "is_success": False}
-        return self._observation(distance), info
+        return self._observation(distance, self._cast_rays()), info
 
     def step(self, action: np.ndarray):
         if not self._ready:
@@ -239,6 +240,7 @@ class ReachEnv(gym.Env):
         distance = float(np.linalg.norm(goal - self.ee_pos))
         reached = distance < cfg.goal_tolerance
         n_shakes = self._shake.update(distance)
+        rays = self._cast_rays()
         w = cfg.rewards
         terms = {
             "success": R.success_reward(distance, cfg.goal_tolerance, w),
@@ -248,6 +250,7 @@ class ReachEnv(gym.Env):
             "out_of_bounds": R.out_of_bounds_reward(outside, w),
             "exhausted": 0.0,
             "progress": R.progress_reward(self._previous_distance, distance, w),
+            "proximity": R.proximity_reward(float(rays.min()), w),
         }
         final_goal = self.goal_index == len(self.goals) - 1
         success = reached and final_goal
@@ -276,16 +279,19 @@ class ReachEnv(gym.Env):
             "n_shakes": n_shakes,
             "time": self.time,
         }
-        return self._observation(distance), float(sum(terms.values())), terminated, truncated, info
+        return self._observation(distance, rays), float(sum(terms.values())), terminated, truncated, info
 
-    def _observation(self, distance: float) -> np.ndarray:
+    def _cast_rays(self) -> np.ndarray:
+        origins, directions = self.rays.world_rays(self.frames)
+        return self.caster.cast(origins, directions, self.config.ray_range)
+
+    def _observation(self, distance: float, rays: np.ndarray) -> np.ndarray:
         obs = np.empty(OBS_SIZE, dtype=np.float32)
         obs[0:6] = self.q
         obs[6:9] = self.goals[self.goal_index] - self.ee_pos
         obs[9:12] = matrix_to_rpy(self.ref_rot_t @ self.ee_rot)
         obs[12] = distance
-        origins, directions = self.rays.world_rays(self.frames)
-        obs[N_ROBOT_OBS:] = self.caster.cast(origins, directions, self.config.ray_range)
+        obs[N_ROBOT_OBS:] = rays
         return obs
 
     # ------------------------------------------------------------------ rendering

@@ -158,3 +158,28 @@ def load_policy(path: str | Path, device: str = "cpu") -> Policy:
     if norm is not None and bool(norm["norm_obs"]):
         normalization = Normalization(norm["obs_mean"], norm["obs_var"], float(norm["clip_obs"]), float(norm["epsilon"]))
     return Policy(model, normalization, meta, Path(path))
+
+
+def export_bundle(source: str | Path, target: str | Path) -> tuple[Path, Path]:
+    """Copy a run's model (or its latest checkpoint) to ``target`` and write the metadata
+    beside it as ``target`` with a .json suffix: what a shipped policy carries."""
+    import shutil
+
+    source, target = Path(source), Path(target)
+    if source.is_dir():
+        candidates = [source / "model.zip", source / "checkpoint.zip"]
+        found = [c for c in candidates if c.exists()]
+        if not found:
+            raise CheckpointError(f"{source} holds neither model.zip nor checkpoint.zip")
+        source = max(found, key=lambda c: read_bundle_meta(c)[0]["timesteps"])
+    meta, _ = read_bundle_meta(source)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    shutil.copyfile(source, target)
+    info = {k: meta.get(k) for k in ("robot", "kind", "timesteps", "wall_time_s", "machine", "git_commit", "command")}
+    info["source"] = str(source)
+    info["curriculum"] = {"goal_size": meta["state"]["goal"]["size"], "obstacles": meta["state"]["obstacles"]["count"],
+                          "episodes": meta["state"]["episodes"]}
+    info["config"] = meta["config"]
+    json_path = target.with_suffix(".json")
+    json_path.write_text(json.dumps(info, indent=2, default=_json_default) + "\n")
+    return target, json_path

@@ -25,6 +25,11 @@ class RewardWeights:
     """r_shake = shaking * n_s."""
     progress: float = 0.0
     """Not in the paper (0 there): progress * (d_{t-1} - d_t), a dense term for training."""
+    proximity: float = 0.0
+    """Not in the paper (0 there): proximity * (1 - f / proximity_range) for the shortest ray
+    fraction f below ``proximity_range``: a warning before a collision, for training."""
+    proximity_range: float = 0.25
+    """Ray fraction (of the 0.4 m range) under which the proximity term starts."""
 
 
 def success_reward(distance: float, tolerance: float, w: RewardWeights = RewardWeights()) -> float:
@@ -53,6 +58,10 @@ def shaking_reward(n_shakes: int, w: RewardWeights = RewardWeights()) -> float:
 
 def progress_reward(previous_distance: float, distance: float, w: RewardWeights = RewardWeights()) -> float:
     return w.progress * (previous_distance - distance)
+
+
+def proximity_reward(min_fraction: float, w: RewardWeights = RewardWeights()) -> float:
+    return w.proximity * max(0.0, 1.0 - min_fraction / w.proximity_range)
 
 
 def count_uneven_movements(distances: list[float] | deque[float]) -> int:

@@ -30,7 +30,7 @@ CURVE_PNG = "learning_curve.png"
 OUTCOMES = ("success", "collision", "out_of_bounds", "timeout")
 RECENT = 200
 """Episodes over which training rates are computed."""
-REWARD_TERMS = tuple(f.name for f in fields(RewardWeights))
+REWARD_TERMS = tuple(f.name for f in fields(RewardWeights) if f.name != "proximity_range")
 
 
 @dataclass(frozen=True)
@@ -66,6 +66,8 @@ class TrainConfig:
     """Running normalisation of observations and rewards (VecNormalize); not in the paper."""
     progress_weight: float = 10.0
     """Weight of the progress term d_{t-1} - d_t; 0 is the paper's reward alone."""
+    proximity_weight: float = -0.1
+    """Weight of the proximity term (rays shorter than 0.1 m); 0 is the paper's reward alone."""
     checkpoint_every: int = 100_000
     goal: GoalSizeParams = field(default_factory=GoalSizeParams)
     obstacles: ObstacleParams = field(default_factory=ObstacleParams)
@@ -85,7 +87,7 @@ def make_env_fn(config: TrainConfig, rank: int):
         env_config = EnvConfig(
             goal_tolerance=config.goal.rho,
             max_steps=config.max_episode_steps,
-            rewards=replace(RewardWeights(), progress=config.progress_weight),
+            rewards=replace(RewardWeights(), progress=config.progress_weight, proximity=config.proximity_weight),
             random_world=RandomWorldConfig(n_obstacles=config.obstacles.start),
         )
         env = ReachEnv(robot=config.robot, scenario="random", config=env_config)
