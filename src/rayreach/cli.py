@@ -53,6 +53,10 @@ def build_parser() -> argparse.ArgumentParser:
                        help="weight of the progress reward term (0: the paper's reward alone)")
     train.add_argument("--proximity-weight", type=float, default=None,
                        help="weight of the proximity reward term (0: the paper's reward alone)")
+    train.add_argument("--target-kl", type=float, default=None, help="early-stop updates at this KL (0: never)")
+    train.add_argument("--separate-features", action="store_true", help="actor and critic get their own extractor")
+    train.add_argument("--obstacles", type=int, default=None, help="fix the obstacle count (no obstacle curriculum)")
+    train.add_argument("--goal-size", type=float, default=None, help="fix the goal size, m (no goal curriculum)")
 
     roll = sub.add_parser("rollout", help="run a saved policy and report success, collisions, path length")
     roll.add_argument("--model", required=True, help="a model or checkpoint .zip")
@@ -154,6 +158,7 @@ def _bench(args: argparse.Namespace) -> int:
 def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
     from dataclasses import replace
 
+    from rayreach.curriculum import GoalSizeParams, ObstacleParams
     from rayreach.robots import get_robot
     from rayreach.train import TrainConfig, train
 
@@ -166,6 +171,15 @@ def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
         config = replace(config, progress_weight=args.progress_weight)
     if args.proximity_weight is not None:
         config = replace(config, proximity_weight=args.proximity_weight)
+    if args.target_kl is not None:
+        config = replace(config, target_kl=args.target_kl or None)
+    if args.separate_features:
+        config = replace(config, share_features=False)
+    if args.obstacles is not None:
+        config = replace(config, obstacles=ObstacleParams(start=args.obstacles, minimum=args.obstacles,
+                                                          maximum=args.obstacles))
+    if args.goal_size is not None:
+        config = replace(config, goal=GoalSizeParams(rho=args.goal_size, e_zeta=2**62))
     command = "rayreach " + " ".join(sys.argv[1:] if argv is None else argv)
     path = train(config, args.out, resume=args.resume, command=command)
     print(f"model: {path}")

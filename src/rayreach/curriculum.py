@@ -83,7 +83,9 @@ class ObstacleParams:
     goes up by one if the success rate was at least ``raise_at`` and down by one if it was
     below ``lower_at``; it stays within [minimum, maximum]."""
 
-    start: int = 0
+    start: int = 1
+    """Not 0: a policy first trained in empty worlds learns to rush straight at the goal and
+    loses its exploration noise before obstacles arrive (docs/training.md)."""
     minimum: int = 0
     maximum: int = 3
     window: int = 200
