@@ -64,7 +64,7 @@ def test_one_state_for_all_envs_and_round_trip():
 
 
 def test_obstacle_curriculum_rises_and_falls_per_window():
-    c = ObstacleCurriculum(ObstacleParams(window=10, raise_at=0.8, lower_at=0.3, maximum=2))
+    c = ObstacleCurriculum(ObstacleParams(start=0, window=10, raise_at=0.8, lower_at=0.3, maximum=2))
     for _ in range(10):
         c.record(True)
     assert c.count == 1
