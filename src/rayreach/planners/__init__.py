@@ -1,0 +1,1 @@
+"""Path planners compared with the DRL policy: sampling-based planners in joint space."""
