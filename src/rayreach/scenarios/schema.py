@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
@@ -58,19 +58,6 @@ class ObstacleSpec:
             s = s if s <= self.travel else 2 * self.travel - s
         return tuple(p + v / speed * s for p, v in zip(self.position, self.velocity))  # type: ignore[return-value]
 
-    def bounding_radius(self) -> float:
-        """Radius of a sphere around the centre that contains the obstacle."""
-        if self.shape == "box":
-            assert self.half_extents is not None
-            return math.sqrt(sum(h * h for h in self.half_extents))
-        if self.shape == "sphere":
-            assert self.radius is not None
-            return self.radius
-        if self.shape == "cylinder":
-            assert self.radius is not None and self.height is not None
-            return math.hypot(self.radius, self.height / 2)
-        return math.inf
-
 
 @dataclass(frozen=True)
 class StartSpec:
@@ -93,7 +80,6 @@ class Scenario:
     description: str = ""
     base_position: Vec3 | None = None
     base_rpy: Vec3 | None = None
-    extra: dict[str, Any] = field(default_factory=dict, compare=False)
 
     def in_workspace(self, point: tuple[float, ...]) -> bool:
         return all(lo <= x <= hi for x, lo, hi in zip(point, self.workspace_low, self.workspace_high))
