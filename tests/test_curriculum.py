@@ -63,18 +63,23 @@ def test_one_state_for_all_envs_and_round_trip():
     assert again.record(False) == goal.record(False)
 
 
-def test_obstacle_curriculum_rises_and_falls_per_window():
+def test_obstacle_curriculum_rises_on_true_size_episodes_and_falls_on_all():
     c = ObstacleCurriculum(ObstacleParams(start=0, window=10, raise_at=0.8, lower_at=0.3, maximum=2))
+    for _ in range(30):
+        c.record(True, at_true_size=False)  # success with an enlarged goal says nothing
+    assert c.count == 0
     for _ in range(10):
         c.record(True)
     assert c.count == 1
+    for _ in range(8):
+        c.record(True)
+    for _ in range(2):
+        c.record(False)
+    assert c.count == 2  # 80 % at the true size is enough
     for _ in range(10):
-        c.record(True, may_raise=False)  # held while the goal is still enlarged
-    assert c.count == 1
-    for _ in range(20):
         c.record(True)
     assert c.count == 2  # capped at the maximum
     for _ in range(10):
-        c.record(False)
-    assert c.count == 1
+        c.record(False, at_true_size=False)
+    assert c.count == 1  # any 10 episodes below 30 % lower it
     assert ObstacleCurriculum.from_state(c.state()).state() == c.state()

@@ -79,9 +79,10 @@ class AugmentedGoalSize:
 
 @dataclass(frozen=True)
 class ObstacleParams:
-    """Obstacle curriculum: after every ``window`` episodes at the current count, the count
-    goes up by one if the success rate was at least ``raise_at`` and down by one if it was
-    below ``lower_at``; it stays within [minimum, maximum]."""
+    """Obstacle curriculum: the count goes up by one once ``window`` episodes played at the
+    true goal size have a success rate of at least ``raise_at``, and down by one once
+    ``window`` episodes of any goal size have one below ``lower_at``; it stays within
+    [minimum, maximum]."""
 
     start: int = 1
     """Not 0: a policy first trained in empty worlds learns to rush straight at the goal and
@@ -99,31 +100,42 @@ class ObstacleCurriculum:
     count: int = -1
     successes: int = 0
     episodes: int = 0
+    true_successes: int = 0
+    true_episodes: int = 0
 
     def __post_init__(self) -> None:
         if self.count < 0:
             self.count = self.params.start
 
-    def record(self, success: bool, may_raise: bool = True) -> int:
+    def record(self, success: bool, at_true_size: bool = True) -> int:
         """Feed one episode's outcome; returns the obstacle count for the next episodes.
 
-        ``may_raise=False`` holds the count (the trainer passes it while the augmented goal
-        is larger than the true one: success there says little about the real task)."""
+        Only episodes played at the true goal size count towards raising: while the goal is
+        enlarged, the goal-size curriculum keeps success near 90 % whatever the skill."""
+        p = self.params
         self.episodes += 1
         self.successes += int(success)
-        p = self.params
-        if self.episodes >= p.window:
-            rate = self.successes / self.episodes
-            if rate >= p.raise_at and self.count < p.maximum and may_raise:
+        if at_true_size:
+            self.true_episodes += 1
+            self.true_successes += int(success)
+        if self.true_episodes >= p.window:
+            if self.true_successes / self.true_episodes >= p.raise_at and self.count < p.maximum:
                 self.count += 1
-            elif rate < p.lower_at and self.count > p.minimum:
+                self.successes = self.episodes = 0
+            self.true_successes = self.true_episodes = 0
+        if self.episodes >= p.window:
+            if self.successes / self.episodes < p.lower_at and self.count > p.minimum:
                 self.count -= 1
+                self.true_successes = self.true_episodes = 0
             self.successes = self.episodes = 0
         return self.count
 
     def state(self) -> dict[str, Any]:
-        return {"count": self.count, "successes": self.successes, "episodes": self.episodes, "params": asdict(self.params)}
+        return {"count": self.count, "successes": self.successes, "episodes": self.episodes,
+                "true_successes": self.true_successes, "true_episodes": self.true_episodes,
+                "params": asdict(self.params)}
 
     @classmethod
     def from_state(cls, state: dict[str, Any]) -> "ObstacleCurriculum":
-        return cls(ObstacleParams(**state["params"]), state["count"], state["successes"], state["episodes"])
+        return cls(ObstacleParams(**state["params"]), state["count"], state["successes"], state["episodes"],
+                   state.get("true_successes", 0), state.get("true_episodes", 0))

@@ -243,7 +243,7 @@ def _make_callback(config: TrainConfig, state: TrainState, out: Path, total: int
                     success = bool(info.get("is_success"))
                     at_true_size = state.goal.size <= state.goal.params.rho_min + 1e-9
                     state.goal.record(success)
-                    state.obstacles.record(success, may_raise=at_true_size)
+                    state.obstacles.record(success, at_true_size=at_true_size)
                     state.episodes += 1
                     state.recent.append(episode_outcome(info))
                     self.finished_terms.append(dict(sums))
