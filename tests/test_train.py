@@ -86,6 +86,8 @@ def test_resume_refuses_another_robot(tmp_path):
     out = tmp_path / "run"
     first = _run(*_train_args(out, 1024))
     assert first.returncode == 0, first.stderr[-2000:]
+    again = _run(*_train_args(out, 1024), "--resume")  # nothing left to train: still a model
+    assert again.returncode == 0, again.stderr[-2000:]
     other = _run("train", "--robot", "kr16", "--timesteps", "2048", "--envs", "2", "--workers", "1",
                  "--out", str(out), "--resume")
     assert other.returncode == 2 and "ur5" in other.stderr and "kr16" in other.stderr

@@ -379,7 +379,7 @@ def train(config: TrainConfig, out: str | Path, resume: bool = False, command: s
                 interrupted = True
             finally:
                 signal.signal(signal.SIGTERM, previous)
-        callback.save_checkpoint()
+            callback.save_checkpoint()  # the callback is bound to the model only once learn() ran
         if interrupted:
             raise KeyboardInterrupt(f"interrupted at {model.num_timesteps} steps; resume with --resume")
         meta = bundle_meta(config, state, model.num_timesteps, "model")
