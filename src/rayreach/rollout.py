@@ -9,7 +9,7 @@ import numpy as np
 from tqdm import tqdm
 
 from rayreach.env import ReachEnv
-from rayreach.policy import CheckpointError, load_policy
+from rayreach.policy import load_policy
 from rayreach.scenarios import RANDOM
 
 EVAL_SEED_OFFSET = 1_000_000
@@ -50,8 +50,6 @@ def rollout(
     final obstacle count of training unless ``n_obstacles`` is given."""
     policy = load_policy(model)
     env = ReachEnv(robot=policy.robot, scenario=scenario, goal_tolerance=goal_tolerance)
-    if env.spec_robot.name != policy.robot:
-        raise CheckpointError(f"{model} controls a {policy.robot}, but scenario '{scenario}' uses a {env.spec_robot.name}")
     if scenario == RANDOM:
         trained = policy.meta.get("state", {}).get("obstacles", {}).get("count", 0)
         env.set_n_obstacles(trained if n_obstacles is None else n_obstacles)

@@ -44,9 +44,7 @@ def _worker(remote, parent_remote, fns_wrapper: CloudpickleWrapper) -> None:
                 remote.send([envs[i].get_wrapper_attr(name) for i in indices])
             elif cmd == "set_attr":
                 indices, name, value = data
-                for i in indices:
-                    envs[i].set_wrapper_attr(name, value)
-                remote.send(None)
+                remote.send([envs[i].set_wrapper_attr(name, value) for i in indices])
             elif cmd == "env_method":
                 indices, name, args, kwargs = data
                 remote.send([envs[i].get_wrapper_attr(name)(*args, **kwargs) for i in indices])
@@ -151,11 +149,7 @@ class WorkerVecEnv(VecEnv):
         return self._ask("get_attr", indices, attr_name)
 
     def set_attr(self, attr_name: str, value: Any, indices: VecEnvIndices = None) -> None:
-        plan = self._by_worker(indices)
-        for worker, local in plan:
-            self.remotes[worker].send(("set_attr", (local, attr_name, value)))
-        for worker, _ in plan:
-            self.remotes[worker].recv()
+        self._ask("set_attr", indices, attr_name, value)
 
     def env_method(self, method_name: str, *method_args, indices: VecEnvIndices = None, **method_kwargs) -> list[Any]:
         return self._ask("env_method", indices, method_name, method_args, method_kwargs)
