@@ -1,14 +1,18 @@
-"""Environment throughput, measured side by side for both ray backends in one process."""
+"""Benchmarks: environment throughput for both ray backends side by side, and the planners."""
 
 from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
 
 from rayreach.env import ReachEnv
 from rayreach.scene import RAY_BACKENDS
+
+if TYPE_CHECKING:
+    from rayreach.planners.collision import CollisionChecker
 
 
 @dataclass(frozen=True)
@@ -90,3 +94,51 @@ def step_breakdown(robot: str, scenario: str, calls: int = 2000, seed: int = 0) 
     finally:
         env.close()
     return {k: round(v, 1) for k, v in parts.items()}
+
+
+def checks_per_second(checker: "CollisionChecker", low: np.ndarray, high: np.ndarray, n: int = 5000,
+                      seed: int = 0) -> float:
+    """Configuration checks per second of the shared checker on uniform samples in a box."""
+    samples = np.random.default_rng(seed).uniform(low, high, size=(n, len(low)))
+    t0 = time.perf_counter()
+    for q in samples:
+        checker.valid(q)
+    return n / (time.perf_counter() - t0)
+
+
+def bench_planners(scenario: str, runs: int, planners: Sequence[str], time_limit: float = 30.0,
+                   progress: bool = True) -> dict:
+    """Every sampling planner on ``runs`` seeds of one scenario through the executor: median
+    planning time and end-effector path length over solved runs, success counts, and the
+    checker's configuration checks per second (in the start-goal sampling box)."""
+    from tqdm import tqdm
+
+    from rayreach.execution import Executor
+    from rayreach.planners import make_planner
+    from rayreach.planners.collision import sampling_box
+
+    results: dict = {}
+    with Executor(scenario) as ex:
+        q_start = ex.reset(0)
+        goals, _, _ = ex.goal_configurations(0)
+        low, high = sampling_box(ex.checker, q_start, goals[-1] if goals else q_start, 1.0)
+        cps = checks_per_second(ex.checker, low, high)
+        bar = tqdm(total=runs * len(planners), desc=f"bench-planners {scenario}", disable=not progress, leave=False)
+        for name in planners:
+            planner = make_planner(name, ex.robot, time_limit=time_limit)
+            records = []
+            for seed in range(runs):
+                records.append(ex.run(planner, seed))
+                bar.update()
+            solved = [r for r in records if r.plan_status == "solved"]
+            results[name] = {
+                "solved": len(solved),
+                "success": sum(r.success for r in records),
+                "runs": runs,
+                "planning_time_median_s": float(np.median([r.planning_time for r in solved])) if solved else None,
+                "path_length_median_m": float(np.median([r.path_length for r in solved])) if solved else None,
+                "statuses": sorted({r.plan_status for r in records}),
+            }
+        bar.close()
+    return {"scenario": scenario, "runs": runs, "time_limit_s": time_limit, "checks_per_s": round(cps, 1),
+            "planners": results}

@@ -40,6 +40,14 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument("--json", action="store_true", help="print one JSON line")
     bench.add_argument("--breakdown", action="store_true", help="also time each part of a step (us per call)")
 
+    bplan = sub.add_parser("bench-planners", help="planning time, path length and collision checks/s of the planners")
+    bplan.add_argument("--scenario", default="exp1", help="exp1..exp7 or a scene file")
+    bplan.add_argument("--runs", type=int, default=10)
+    bplan.add_argument("--planners", default=None,
+                       help="comma-separated (default: rrt,ncrrt,birrt and the OMPL peers when installed)")
+    bplan.add_argument("--time-limit", type=float, default=30.0, help="seconds per planning query")
+    bplan.add_argument("--json", action="store_true", help="print one JSON line")
+
     train = sub.add_parser("train", help="train a PPO policy on random worlds (resumable)")
     train.add_argument("--robot", required=True, help="ur5 or kr16")
     train.add_argument("--timesteps", type=int, default=2_000_000, help="total environment steps")
@@ -87,6 +95,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _show(args, _pick_scenario(args, parser))
         if args.command == "bench-env":
             return _bench(args)
+        if args.command == "bench-planners":
+            return _bench_planners(args)
         if args.command == "demo":
             return _demo(args)
         if args.command == "train":
@@ -152,6 +162,29 @@ def _bench(args: argparse.Namespace) -> int:
     print(f"speedup of numpy over rayTestBatch: {record['speedup']:.2f}x ({result.steps} steps each)")
     for part, us in record.get("us_per_call", {}).items():
         print(f"{part:>22}: {us:7.1f} us")
+    return 0
+
+
+def _bench_planners(args: argparse.Namespace) -> int:
+    from rayreach.bench import bench_planners
+    from rayreach.planners import SAMPLING_PLANNERS
+    from rayreach.planners.ompl_peer import ompl_available
+
+    if args.planners:
+        names = [p.strip() for p in args.planners.split(",") if p.strip()]
+    else:
+        names = [p for p in SAMPLING_PLANNERS if ompl_available() or not p.startswith("ompl")]
+    record = bench_planners(args.scenario, args.runs, names, args.time_limit, progress=not args.json)
+    if args.json:
+        print(json.dumps(record))
+        return 0
+    print(f"{args.scenario}: {args.runs} runs per planner, time limit {args.time_limit:g} s; "
+          f"collision checks: {record['checks_per_s']:,.0f}/s")
+    print(f"{'planner':>16} {'solved':>7} {'success':>8} {'median plan s':>14} {'median path m':>14}")
+    for name, r in record["planners"].items():
+        t = "/" if r["planning_time_median_s"] is None else f"{r['planning_time_median_s']:.4f}"
+        length = "/" if r["path_length_median_m"] is None else f"{r['path_length_median_m']:.3f}"
+        print(f"{name:>16} {r['solved']:>7} {r['success']:>8} {t:>14} {length:>14}")
     return 0
 
 

@@ -1,1 +1,52 @@
-"""Path planners compared with the DRL policy: sampling-based planners in joint space."""
+"""Planners compared on the same scenes: the DRL policy and sampling planners in joint space.
+
+``make_planner(name, robot)`` builds any of :data:`PLANNER_NAMES`; the executor
+(:mod:`rayreach.execution`) runs them all the same way.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+from rayreach.planners.base import GlobalPlanner, ReactivePlanner, SamplingPlanner
+from rayreach.planners.ncrrt import NCRRTConfig, ncrrt
+from rayreach.planners.ompl_peer import OMPLConfig, ompl_available, ompl_plan
+from rayreach.planners.result import PlanResult, Status
+from rayreach.planners.rrt import RRTConfig, birrt, rrt
+from rayreach.planners.smoothing import ShortcutConfig
+
+PLANNER_NAMES = ("drl", "rrt", "birrt", "ncrrt", "ompl-rrt", "ompl-rrtconnect")
+SAMPLING_PLANNERS = PLANNER_NAMES[1:]
+
+
+def make_planner(name: str, robot: str, *, model: str | Path | None = None, time_limit: float | None = None,
+                 smooth: bool = False) -> GlobalPlanner | ReactivePlanner:
+    """Planner ``name`` for ``robot`` with its defaults; ``time_limit`` (s) for sampling
+    planners, ``model`` for the DRL planner (default: the shipped policy)."""
+    if name == "drl":
+        from rayreach.planners.drl import DRLPlanner, shipped_model
+
+        planner = DRLPlanner(model if model is not None else shipped_model(robot))
+        if planner.robot != robot:
+            raise ValueError(f"model {model} is a {planner.robot} policy, not {robot}")
+        return planner
+    algorithms = {
+        "rrt": (rrt, RRTConfig()),
+        "birrt": (birrt, RRTConfig()),
+        "ncrrt": (ncrrt, NCRRTConfig()),
+        "ompl-rrt": (ompl_plan, OMPLConfig(planner="RRT")),
+        "ompl-rrtconnect": (ompl_plan, OMPLConfig(planner="RRTConnect")),
+    }
+    if name not in algorithms:
+        raise ValueError(f"unknown planner '{name}'; valid: {', '.join(PLANNER_NAMES)}")
+    if name.startswith("ompl") and not ompl_available():
+        raise ImportError(f"planner '{name}' needs OMPL: pip install 'rayreach[ompl]'")
+    algorithm, settings = algorithms[name]
+    if time_limit is not None:
+        settings = replace(settings, time_limit=float(time_limit))
+    return SamplingPlanner(name, algorithm, settings, ShortcutConfig() if smooth else None)
+
+
+__all__ = ["PLANNER_NAMES", "SAMPLING_PLANNERS", "GlobalPlanner", "PlanResult", "ReactivePlanner", "Status",
+           "make_planner"]

@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
+from rayreach.planners.result import PlanResult, Status
 from rayreach.scene import Scene
 
 
@@ -37,3 +39,34 @@ class CollisionChecker:
             if not self.valid(qa + (qb - qa) * (i / n)):
                 return False
         return True
+
+
+def check_endpoints(checker: CollisionChecker, start: np.ndarray, goal: np.ndarray) -> Status | None:
+    """The status that stops a query before any search, or None when both ends are valid."""
+    if not checker.valid(start):
+        return Status.INVALID_START
+    if not checker.valid(goal):
+        return Status.GOAL_IN_COLLISION
+    return None
+
+
+def sampling_box(checker: CollisionChecker, start: np.ndarray, goal: np.ndarray,
+                 margin: float | None) -> tuple[np.ndarray, np.ndarray]:
+    """The joint box spanned by start and goal, widened by ``margin`` rad per joint and kept
+    within the limits; the full joint range when ``margin`` is None."""
+    if margin is None:
+        return checker.lower, checker.upper
+    low = np.maximum(checker.lower, np.minimum(start, goal) - margin)
+    high = np.minimum(checker.upper, np.maximum(start, goal) + margin)
+    return low, high
+
+
+def finish_with_recheck(path: list[np.ndarray], checker: CollisionChecker, resolution: float,
+                        config: dict[str, Any], planning_time: float, iterations: int = 0) -> PlanResult:
+    """A found path counts only after the shared checker accepts every edge; otherwise the
+    planner has a bug and the run is a crash, never a fake success."""
+    for qa, qb in zip(path[:-1], path[1:]):
+        if not checker.edge_valid(qa, qb, resolution):
+            return PlanResult(Status.CRASH, None, planning_time, iterations, config,
+                              "the returned path failed the shared collision re-check")
+    return PlanResult(Status.SOLVED, path, planning_time, iterations, config)

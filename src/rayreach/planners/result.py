@@ -28,6 +28,8 @@ class PlanResult:
     config: dict[str, Any] = field(default_factory=dict)
     """Every parameter of the planner that produced this, for traceability."""
     message: str = ""
+    raw_path: list[np.ndarray] | None = None
+    """The path as the planner found it, before smoothing (None when not smoothed)."""
 
     @property
     def solved(self) -> bool:

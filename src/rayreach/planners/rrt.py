@@ -12,7 +12,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from rayreach.planners.collision import CollisionChecker
+from rayreach.planners.collision import CollisionChecker, check_endpoints, finish_with_recheck, sampling_box
 from rayreach.planners.result import PlanResult, Status
 
 
@@ -43,9 +43,13 @@ class Tree:
         self.parents = [-1]
         self.size = 1
 
-    def nearest(self, q: np.ndarray) -> int:
+    def nearest(self, q: np.ndarray, allowed: np.ndarray | None = None) -> int:
+        """Index of the node closest to ``q``, among nodes where ``allowed`` is true if given."""
         diff = self.nodes[: self.size] - q
-        return int(np.argmin(np.einsum("ij,ij->i", diff, diff)))
+        d2 = np.einsum("ij,ij->i", diff, diff)
+        if allowed is not None:
+            d2 = np.where(allowed, d2, np.inf)
+        return int(np.argmin(d2))
 
     def add(self, q: np.ndarray, parent: int) -> int:
         if self.size == len(self.nodes):
@@ -70,45 +74,25 @@ def steer(q_from: np.ndarray, q_to: np.ndarray, step: float) -> np.ndarray:
     return q_to.copy() if largest <= step else q_from + diff * (step / largest)
 
 
-def sampling_box(checker: CollisionChecker, start: np.ndarray, goal: np.ndarray,
-                 config: RRTConfig) -> tuple[np.ndarray, np.ndarray]:
-    if config.sampling_margin is None:
-        return checker.lower, checker.upper
-    low = np.maximum(checker.lower, np.minimum(start, goal) - config.sampling_margin)
-    high = np.minimum(checker.upper, np.maximum(start, goal) + config.sampling_margin)
-    return low, high
-
-
-def _check_endpoints(checker: CollisionChecker, start: np.ndarray, goal: np.ndarray) -> Status | None:
-    if not checker.valid(start):
-        return Status.INVALID_START
-    if not checker.valid(goal):
-        return Status.GOAL_IN_COLLISION
-    return None
-
-
-def _finish(path: list[np.ndarray] | None, checker: CollisionChecker, config: RRTConfig, t0: float,
+def finish(path: list[np.ndarray] | None, checker: CollisionChecker, config: RRTConfig, t0: float,
             iterations: int, name: str) -> PlanResult:
     elapsed = time.perf_counter() - t0
     record = {"planner": name, **asdict(config)}
     if path is None:
         return PlanResult(Status.TIMEOUT, None, elapsed, iterations, record,
                           f"no path within {config.time_limit} s / {iterations} iterations")
-    for qa, qb in zip(path[:-1], path[1:]):  # the shared checker gets the last word
-        if not checker.edge_valid(qa, qb, config.resolution):
-            return PlanResult(Status.CRASH, None, elapsed, iterations, record, "returned path failed the re-check")
-    return PlanResult(Status.SOLVED, path, elapsed, iterations, record)
+    return finish_with_recheck(path, checker, config.resolution, record, elapsed, iterations)
 
 
 def rrt(start: np.ndarray, goal: np.ndarray, checker: CollisionChecker, rng: np.random.Generator,
         config: RRTConfig = RRTConfig()) -> PlanResult:
     """Goal-biased RRT from ``start``; solved once an edge reaches ``goal`` exactly."""
     t0 = time.perf_counter()
-    bad = _check_endpoints(checker, start, goal)
+    bad = check_endpoints(checker, start, goal)
     if bad is not None:
         return PlanResult(bad, None, time.perf_counter() - t0, 0, {"planner": "rrt", **asdict(config)})
     tree = Tree(start)
-    low, high = sampling_box(checker, start, goal, config)
+    low, high = sampling_box(checker, start, goal, config.sampling_margin)
     iterations = 0
     while iterations < config.max_iterations and time.perf_counter() - t0 < config.time_limit:
         iterations += 1
@@ -119,11 +103,11 @@ def rrt(start: np.ndarray, goal: np.ndarray, checker: CollisionChecker, rng: np.
             continue
         index = tree.add(new, near)
         if np.array_equal(new, goal):
-            return _finish(tree.path_to(index), checker, config, t0, iterations, "rrt")
-    return _finish(None, checker, config, t0, iterations, "rrt")
+            return finish(tree.path_to(index), checker, config, t0, iterations, "rrt")
+    return finish(None, checker, config, t0, iterations, "rrt")
 
 
-def _connect(tree: Tree, target: np.ndarray, checker: CollisionChecker, config: RRTConfig) -> tuple[int, bool]:
+def connect(tree: Tree, target: np.ndarray, checker: CollisionChecker, config: RRTConfig) -> tuple[int, bool]:
     """Greedy extension of ``tree`` towards ``target``: (last node added or nearest, reached)."""
     index = tree.nearest(target)
     while True:
@@ -141,11 +125,11 @@ def birrt(start: np.ndarray, goal: np.ndarray, checker: CollisionChecker, rng: n
     """Bidirectional RRT (RRT-Connect): trees from start and goal take turns growing one step
     towards a random sample, and the other tree then greedily connects to the new node."""
     t0 = time.perf_counter()
-    bad = _check_endpoints(checker, start, goal)
+    bad = check_endpoints(checker, start, goal)
     if bad is not None:
         return PlanResult(bad, None, time.perf_counter() - t0, 0, {"planner": "birrt", **asdict(config)})
     trees = [Tree(start), Tree(goal)]
-    low, high = sampling_box(checker, start, goal, config)
+    low, high = sampling_box(checker, start, goal, config.sampling_margin)
     iterations = 0
     while iterations < config.max_iterations and time.perf_counter() - t0 < config.time_limit:
         iterations += 1
@@ -156,9 +140,9 @@ def birrt(start: np.ndarray, goal: np.ndarray, checker: CollisionChecker, rng: n
         if not checker.valid(new) or not checker.edge_valid(grow.nodes[near], new, config.resolution):
             continue
         added = grow.add(new, near)
-        joined, reached = _connect(other, new, checker, config)
+        joined, reached = connect(other, new, checker, config)
         if reached:
             a, b = grow.path_to(added), other.path_to(joined)
             path = a + b[::-1][1:] if grow is trees[0] else b + a[::-1][1:]
-            return _finish(path, checker, config, t0, iterations, "birrt")
-    return _finish(None, checker, config, t0, iterations, "birrt")
+            return finish(path, checker, config, t0, iterations, "birrt")
+    return finish(None, checker, config, t0, iterations, "birrt")

@@ -1,0 +1,47 @@
+"""The paper's planner: a trained PPO policy acting on rays and robot state, step by step."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from rayreach.planners.base import ReactivePlanner
+from rayreach.policy import load_policy
+
+MODELS_DIR = Path(__file__).resolve().parents[3] / "models"
+"""The repository's shipped policies (``models/ur5.zip``, ``models/kr16.zip``)."""
+
+
+def shipped_model(robot: str) -> Path:
+    """The shipped policy for ``robot``: ``models/<robot>.zip`` in the working directory or
+    in the repository; the error names both places."""
+    for folder in (Path("models"), MODELS_DIR):
+        candidate = folder / f"{robot}.zip"
+        if candidate.is_file():
+            return candidate
+    raise FileNotFoundError(
+        f"no shipped policy for '{robot}': looked for models/{robot}.zip and {MODELS_DIR / (robot + '.zip')}; "
+        "pass a model with --model (a checkpoint.zip or an exported bundle)"
+    )
+
+
+class DRLPlanner(ReactivePlanner):
+    name = "drl"
+
+    def __init__(self, model: str | Path, deterministic: bool = True) -> None:
+        self.policy = load_policy(model)
+        self.deterministic = deterministic
+
+    @property
+    def robot(self) -> str:
+        return self.policy.robot
+
+    def act(self, observation: np.ndarray) -> np.ndarray:
+        return self.policy.act(observation, self.deterministic)
+
+    def config(self) -> dict[str, Any]:
+        meta = self.policy.meta
+        return {"planner": self.name, "model": str(self.policy.path), "deterministic": self.deterministic,
+                "timesteps": meta.get("timesteps"), "git_commit": meta.get("git_commit")}
