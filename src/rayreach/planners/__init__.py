@@ -35,8 +35,8 @@ def make_planner(name: str, robot: str, *, model: str | Path | None = None, time
         "rrt": (rrt, RRTConfig()),
         "birrt": (birrt, RRTConfig()),
         "ncrrt": (ncrrt, NCRRTConfig()),
-        "ompl-rrt": (ompl_plan, OMPLConfig(planner="RRT")),
-        "ompl-rrtconnect": (ompl_plan, OMPLConfig(planner="RRTConnect")),
+        "ompl-rrt": (ompl_plan, OMPLConfig(algorithm="RRT")),
+        "ompl-rrtconnect": (ompl_plan, OMPLConfig(algorithm="RRTConnect")),
     }
     if name not in algorithms:
         raise ValueError(f"unknown planner '{name}'; valid: {', '.join(PLANNER_NAMES)}")

@@ -29,7 +29,7 @@ def ompl_available() -> bool:
 
 @dataclass(frozen=True)
 class OMPLConfig:
-    planner: str = "RRTConnect"
+    algorithm: str = "RRTConnect"
     """``RRT`` or ``RRTConnect`` (OMPL class names)."""
     step_size: float = 0.4
     """OMPL's ``range``; OMPL measures it as the Euclidean joint distance, rad."""
@@ -47,13 +47,13 @@ def ompl_plan(start: np.ndarray, goal: np.ndarray, checker: CollisionChecker, rn
               config: OMPLConfig = OMPLConfig()) -> PlanResult:
     """Plan with OMPL; OMPL's global random generator is seeded from ``rng`` first, so equal
     seeds give equal paths when the run is not cut by the time limit."""
-    if config.planner not in OMPL_PLANNERS:
-        raise ValueError(f"unknown OMPL planner '{config.planner}'; valid: {', '.join(OMPL_PLANNERS)}")
+    if config.algorithm not in OMPL_PLANNERS:
+        raise ValueError(f"unknown OMPL planner '{config.algorithm}'; valid: {', '.join(OMPL_PLANNERS)}")
     from ompl import base as ob
     from ompl import geometric as og
     from ompl import util as ou
 
-    record = {"planner": f"ompl-{config.planner.lower()}", **asdict(config)}
+    record = {"planner": f"ompl-{config.algorithm.lower()}", **asdict(config)}
     t0 = time.perf_counter()
     bad = check_endpoints(checker, start, goal)
     if bad is not None:
@@ -86,9 +86,9 @@ def ompl_plan(start: np.ndarray, goal: np.ndarray, checker: CollisionChecker, rn
     # OMPL spaces edge checks by Euclidean length and at other points than the shared re-check;
     # checking at half the resolution keeps paths that pass OMPL but fail the re-check rare.
     info.setStateValidityCheckingResolution(0.5 * config.resolution / space.getMaximumExtent())
-    planner = getattr(og, config.planner)(info)
+    planner = getattr(og, config.algorithm)(info)
     planner.setRange(config.step_size)
-    if config.planner == "RRT":
+    if config.algorithm == "RRT":
         planner.setGoalBias(config.goal_bias)
     setup.setPlanner(planner)
     status = setup.solve(config.time_limit)
@@ -96,7 +96,7 @@ def ompl_plan(start: np.ndarray, goal: np.ndarray, checker: CollisionChecker, rn
     if not setup.haveExactSolutionPath():
         setup.clear()
         return PlanResult(Status.TIMEOUT, None, elapsed, 0, record,
-                          f"OMPL {config.planner}: {status} within {config.time_limit} s")
+                          f"OMPL {config.algorithm}: {status} within {config.time_limit} s")
     solution = setup.getSolutionPath()
     path = [np.array([solution.getState(k)[i] for i in range(dof)]) for k in range(solution.getStateCount())]
     setup.clear()
