@@ -109,7 +109,7 @@ def checks_per_second(checker: "CollisionChecker", low: np.ndarray, high: np.nda
 def bench_planners(scenario: str, runs: int, planners: Sequence[str], time_limit: float = 30.0,
                    progress: bool = True) -> dict:
     """Every sampling planner on ``runs`` seeds of one scenario through the executor: median
-    planning time and end-effector path length over solved runs, success counts, and the
+    planning time over solved queries and end-effector path length over successful runs, success counts, and the
     checker's configuration checks per second (in the start-goal sampling box)."""
     from tqdm import tqdm
 
@@ -131,12 +131,13 @@ def bench_planners(scenario: str, runs: int, planners: Sequence[str], time_limit
                 records.append(ex.run(planner, seed))
                 bar.update()
             solved = [r for r in records if r.plan_status == "solved"]
+            succeeded = [r for r in records if r.success]
             results[name] = {
                 "solved": len(solved),
                 "success": sum(r.success for r in records),
                 "runs": runs,
                 "planning_time_median_s": float(np.median([r.planning_time for r in solved])) if solved else None,
-                "path_length_median_m": float(np.median([r.path_length for r in solved])) if solved else None,
+                "path_length_median_m": float(np.median([r.path_length for r in succeeded])) if succeeded else None,
                 "statuses": sorted({r.plan_status for r in records}),
             }
         bar.close()

@@ -2,8 +2,8 @@
 
 A run starts from the scenario's start configuration at t = 0. A global planner plans on the
 scene as it is at t = 0 (obstacles frozen), then its joint path is timed: each control period
-(``EnvConfig.control_period``) the arm moves at most ``ee_step`` (0.005 m, the DRL action's
-limit) with its end effector and at most ``velocity * period`` in every joint. A reactive
+(``EnvConfig.control_period``) the arm moves its end effector at most ``ee_step`` (0.005 m)
+along each axis, the DRL action's bound, and at most ``velocity * period`` in every joint. A reactive
 planner acts once per control period through :class:`~rayreach.env.ReachEnv`. Either way the
 arm is checked for collision at every control step against the obstacles where they are at
 that time. Definitions of the recorded metrics: ``docs/metrics.md``.
@@ -87,15 +87,18 @@ def polyline_length(points: np.ndarray) -> float:
 def time_path(kin: Kinematics, path: list[np.ndarray], velocity: np.ndarray, period: float,
               ee_step: float) -> tuple[np.ndarray, np.ndarray]:
     """Joint configurations, one per control step (the first is ``path[0]``), moving along the
-    straight joint segments of ``path`` at the speed limits; and their tool positions."""
+    straight joint segments of ``path`` at the speed limits; and their tool positions.
+
+    The end-effector limit is the DRL action's bound: at most ``ee_step`` along each world
+    axis per step."""
     qs, ees = [np.asarray(path[0], dtype=float)], [kin.fk(path[0])[:3, 3]]
     for qa, qb in zip(path[:-1], path[1:]):
         n = max(1, math.ceil(float(np.max(np.abs(qb - qa) / (velocity * period)))))
-        while True:  # more steps until no step moves the end effector farther than ee_step
+        while True:  # more steps until no step moves the end effector more than ee_step along an axis
             seg_q = qa + (qb - qa) * (np.arange(1, n + 1)[:, None] / n)
             seg_q[-1] = qb  # exactly: the executor recognises reached goals by equality
             seg_ee = np.array([kin.fk(q)[:3, 3] for q in seg_q])
-            longest = float(np.max(np.linalg.norm(np.diff(np.vstack((ees[-1], seg_ee)), axis=0), axis=1)))
+            longest = float(np.max(np.abs(np.diff(np.vstack((ees[-1], seg_ee)), axis=0))))
             if longest <= ee_step:
                 break
             n = math.ceil(n * longest / ee_step * 1.02) + 1
@@ -243,7 +246,7 @@ class Executor:
         velocity = np.asarray(self.spec.velocity)
         qs, ees = time_path(self.kin, path, velocity, self.period, self.spec.ee_step)
         raw_length = polyline_length(time_path(self.kin, raw, velocity, self.period, self.spec.ee_step)[1])
-        goal_index, replans = 0, 0
+        goal_index, replans, plan_status = 0, 0, Status.SOLVED.value
         executed_q, executed_ee = [qs[0]], [ees[0]]
         collided, message = False, ""
         i = 1
@@ -260,6 +263,7 @@ class Executor:
                 planning += result.planning_time
                 if new_path is None:
                     message = f"replan {replans}: {result.status.value}"
+                    plan_status = result.status.value
                     break
                 qs, ees = time_path(self.kin, new_path, velocity, self.period, self.spec.ee_step)
                 i = 1
@@ -277,7 +281,7 @@ class Executor:
         reached = (not collided and goal_index == len(goals)
                    and float(np.linalg.norm(ee_path[-1] - self.env.goals[-1])) < self.config.goal_tolerance)
         outcome = "success" if reached else "collision" if collided else "no plan"
-        return self._record(planner, seed, outcome=outcome, plan_status=Status.SOLVED.value, success=reached,
+        return self._record(planner, seed, outcome=outcome, plan_status=plan_status, success=reached,
                             collision=collided, path_length=polyline_length(ee_path),
                             path_length_unsmoothed=raw_length if not replans else math.nan,
                             joint_path_length=polyline_length(np.asarray(executed_q)), planning_time=planning,

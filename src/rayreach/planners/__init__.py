@@ -33,7 +33,7 @@ def make_planner(name: str, robot: str, *, model: str | Path | None = None, time
         return planner
     algorithms = {
         "rrt": (rrt, RRTConfig()),
-        "birrt": (birrt, RRTConfig()),
+        "birrt": (birrt, RRTConfig(goal_bias=0.0)),  # RRT-Connect has no goal bias
         "ncrrt": (ncrrt, NCRRTConfig()),
         "ompl-rrt": (ompl_plan, OMPLConfig(algorithm="RRT")),
         "ompl-rrtconnect": (ompl_plan, OMPLConfig(algorithm="RRTConnect")),
