@@ -12,11 +12,11 @@ $(STAMP): pyproject.toml
 	$(PY) -m pip install -q --upgrade pip
 	$(PY) -m pip install -q numpy
 	$(PY) -m pip install -q torch==2.13.0
-	$(PY) -m pip install -q -e ".[test]"
+	$(PY) -m pip install -q -e ".[test,ompl]"
 	touch $(STAMP)
 
 demo: $(STAMP)
-	$(VENV)/bin/rayreach demo --out demo
+	$(VENV)/bin/rayreach evaluate --experiments 1 --runs 3 --out demo --workers 2
 
 test: $(STAMP)
 	$(PY) -m pytest -q

@@ -8,6 +8,9 @@ import sys
 from typing import Sequence
 
 
+EVAL_PLANNERS = "drl,rrt,ncrrt,ompl-rrt,ompl-rrtconnect"
+
+
 def _scenario_arg(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "scenario_pos", nargs="?", metavar="SCENARIO", help="exp1..exp7 or a scene .json file"
@@ -31,6 +34,9 @@ def build_parser() -> argparse.ArgumentParser:
     show.add_argument("--out", default=None, help="PNG file to write (default: SCENARIO.png)")
     show.add_argument("--gui", action="store_true", help="open PyBullet's GUI instead (needs a display)")
     show.add_argument("--seed", type=int, default=0)
+    show.add_argument("--planner", default=None, help="run this planner (drl, rrt, ncrrt, ...) and draw its path")
+    show.add_argument("--model", default=None, help="DRL policy (default: the shipped one for the robot)")
+    show.add_argument("--video", default=None, help="also write the run as a GIF, e.g. exp4.gif")
 
     bench = sub.add_parser("bench-env", help="environment steps per second for both ray backends")
     bench.add_argument("--robot", default="ur5", help="ur5 or kr16")
@@ -47,6 +53,24 @@ def build_parser() -> argparse.ArgumentParser:
                        help="comma-separated (default: rrt,ncrrt,birrt and the OMPL peers when installed)")
     bplan.add_argument("--time-limit", type=float, default=30.0, help="seconds per planning query")
     bplan.add_argument("--json", action="store_true", help="print one JSON line")
+
+    ev = sub.add_parser("evaluate", help="the paper's experiments: every planner, N runs, results.db, table, plots")
+    ev.add_argument("--experiments", default="1-7", help="e.g. 1-7, 1,3, exp4, random-ur5")
+    ev.add_argument("--planners", default=EVAL_PLANNERS, help="comma-separated (--suite random: drl)")
+    ev.add_argument("--runs", type=int, default=30, help="runs per experiment and planner")
+    ev.add_argument("--suite", choices=["random"], default=None,
+                    help="held-out random worlds instead of --experiments (seeds disjoint from training)")
+    ev.add_argument("--robot", default="ur5,kr16", help="robots of --suite random (comma-separated)")
+    ev.add_argument("--episodes", type=int, default=None, help="runs per robot of --suite random")
+    ev.add_argument("--out", required=True, help="results directory, e.g. results/paper")
+    ev.add_argument("--workers", type=int, default=None, help="worker processes (default: CPU cores)")
+    ev.add_argument("--time-limit", type=float, default=30.0, help="planning time limit per query, s")
+    ev.add_argument("--run-timeout", type=float, default=180.0, help="a run taking longer is stored as a crash, s")
+    ev.add_argument("--smooth", action="store_true", help="shortcut-smooth the sampling planners' paths")
+    ev.add_argument("--replan", action="store_true", help="sampling planners replan when the path becomes invalid")
+    ev.add_argument("--model-ur5", default=None, help="DRL policy for the UR5 (default: models/ur5.zip)")
+    ev.add_argument("--model-kr16", default=None, help="DRL policy for the KR16 (default: models/kr16.zip)")
+    ev.add_argument("--report-only", action="store_true", help="only rewrite table, CSV and plots from results.db")
 
     train = sub.add_parser("train", help="train a PPO policy on random worlds (resumable)")
     train.add_argument("--robot", required=True, help="ur5 or kr16")
@@ -95,6 +119,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _show(args, _pick_scenario(args, parser))
         if args.command == "bench-env":
             return _bench(args)
+        if args.command == "evaluate":
+            return _evaluate(args)
         if args.command == "bench-planners":
             return _bench_planners(args)
         if args.command == "demo":
@@ -130,12 +156,32 @@ def _show(args: argparse.Namespace, scenario: str) -> int:
         input()
         env.close()
         return 0
-    env = ReachEnv(scenario=scenario)
-    env.reset(seed=args.seed)
-    name = env.scenario.name if env.scenario else "scene"
-    out = draw_scene(env, args.out or f"{name}.png")
-    env.close()
-    print(f"wrote {out}")
+    if args.planner is None:
+        if args.video:
+            raise ValueError("--video needs a --planner to run (e.g. --planner drl)")
+        env = ReachEnv(scenario=scenario)
+        env.reset(seed=args.seed)
+        name = env.scenario.name if env.scenario else "scene"
+        out = draw_scene(env, args.out or f"{name}.png")
+        env.close()
+        print(f"wrote {out}")
+        return 0
+    from rayreach.execution import Executor
+    from rayreach.planners import make_planner
+    from rayreach.render import write_video
+
+    with Executor(scenario) as ex:
+        planner = make_planner(args.planner, ex.robot, model=args.model)
+        record = ex.run(planner, args.seed)
+        print(f"{args.planner} on {scenario}: {record.outcome}, path {record.path_length:.3f} m, "
+              f"planning {record.planning_time:.3f} s, motion {record.motion_time:.2f} s")
+        if args.video:
+            print(f"wrote {write_video(ex, record, args.video)}")
+        name = ex.env.scenario.name
+        ex.reset(args.seed)  # the picture: the arm and its rays at the start, the path drawn over it
+        out = draw_scene(ex.env, args.out or f"{name}-{args.planner}.png", trajectory=record.ee_path,
+                         title=f"{name}: {args.planner}, {record.outcome}, path {record.path_length:.2f} m")
+        print(f"wrote {out}")
     return 0
 
 
@@ -162,6 +208,46 @@ def _bench(args: argparse.Namespace) -> int:
     print(f"speedup of numpy over rayTestBatch: {record['speedup']:.2f}x ({result.steps} steps each)")
     for part, us in record.get("us_per_call", {}).items():
         print(f"{part:>22}: {us:7.1f} us")
+    return 0
+
+
+def _evaluate(args: argparse.Namespace) -> int:
+    from rayreach.evaluate import EvaluationConfig, evaluate, parse_experiments, write_report
+    from rayreach.evaluate.report import summarise
+    from rayreach.evaluate.runner import RANDOM_PREFIX
+
+    planners = tuple(p.strip() for p in args.planners.split(",") if p.strip())
+    runs = args.runs
+    if args.suite == "random":
+        experiments = tuple(RANDOM_PREFIX + r.strip() for r in args.robot.split(",") if r.strip())
+        if args.planners == EVAL_PLANNERS:
+            planners = ("drl",)
+        runs = args.episodes or 500
+    else:
+        experiments = parse_experiments(args.experiments)
+    models = tuple((robot, path) for robot, path in (("ur5", args.model_ur5), ("kr16", args.model_kr16)) if path)
+    config = EvaluationConfig(experiments, planners, runs=runs, time_limit=args.time_limit,
+                              run_timeout=args.run_timeout, smooth=args.smooth, replan=args.replan, models=models)
+    if args.workers is not None:
+        from dataclasses import replace
+
+        config = replace(config, workers=args.workers)
+    if not args.report_only:
+        evaluate(config, args.out)
+    written = write_report(args.out)
+    from rayreach.evaluate.store import ResultsStore
+
+    store = ResultsStore(written["table"].parent / "results.db")
+    rows = store.rows()
+    store.close()
+    if args.suite == "random":
+        for (experiment, planner), s in sorted(summarise(rows).items()):
+            rates = ", ".join(f"{k} {v / s['runs']:.1%}" for k, v in s["outcomes"].items())
+            print(f"{experiment} {planner}: {s['runs']} worlds: {rates}")
+    else:
+        print(written["table"].read_text())
+    for kind, path in written.items():
+        print(f"{kind}: {path}")
     return 0
 
 

@@ -176,6 +176,10 @@ def export_bundle(source: str | Path, target: str | Path) -> tuple[Path, Path]:
     target.parent.mkdir(parents=True, exist_ok=True)
     shutil.copyfile(source, target)
     info = {k: meta.get(k) for k in ("robot", "kind", "timesteps", "wall_time_s", "machine", "git_commit", "command")}
+    if not info["command"]:  # checkpoints do not record the command line; this reproduces the run
+        c = meta["config"]
+        info["command"] = (f"rayreach train --robot {c['robot']} --timesteps {c['timesteps']} --envs {c['envs']} "
+                           f"--out {source.parent} --checkpoint-every {c['checkpoint_every']} [--resume]")
     info["source"] = str(source)
     info["curriculum"] = {"goal_size": meta["state"]["goal"]["size"], "obstacles": meta["state"]["obstacles"]["count"],
                           "episodes": meta["state"]["episodes"]}

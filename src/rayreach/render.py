@@ -1,14 +1,17 @@
-"""Pictures of a scene: PyBullet's headless camera image with the rays drawn over it."""
+"""Pictures of a scene (PyBullet's headless camera image with the rays drawn over it) and GIFs of runs."""
 
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Sequence
+from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
 
 from rayreach.env import ReachEnv, camera_for
 from rayreach.scene import project_points
+
+if TYPE_CHECKING:
+    from rayreach.execution import Executor, RunRecord
 
 HIT_COLOR = "#e8322b"
 FREE_COLOR = "#2bb24c"
@@ -51,4 +54,26 @@ def draw_scene(env: ReachEnv, out: str | Path, title: str | None = None,
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out)
     plt.close(fig)
+    return out
+
+
+def write_video(executor: "Executor", record: "RunRecord", out: str | Path, frame_every: int = 4,
+                width: int = 480, height: int = 360, fps: int = 30) -> Path:
+    """Replay a run's joint path (obstacles where they were at each step) into a GIF, one
+    frame per ``frame_every`` control steps, from PyBullet's headless renderer."""
+    from PIL import Image
+
+    scene = executor.scene
+    camera = camera_for(executor.env.scenario)
+    frames = []
+    indices = list(range(0, len(record.joint_path), frame_every))
+    if indices and indices[-1] != len(record.joint_path) - 1:
+        indices.append(len(record.joint_path) - 1)
+    for i in indices:
+        scene.set_time(i * executor.period)
+        scene.set_joints(record.joint_path[i])
+        frames.append(Image.fromarray(scene.camera_image(width=width, height=height, **camera)[0]))
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    frames[0].save(out, save_all=True, append_images=frames[1:], duration=int(1000 / fps), loop=0)
     return out
