@@ -18,20 +18,15 @@ from rayreach.scenarios.schema import ObstacleSpec
 
 FAST = RRTConfig(time_limit=20.0)
 needs_ompl = pytest.mark.skipif(not ompl_available(), reason="OMPL not installed (pip install rayreach[ompl])")
-PLANNERS = {
-    "rrt": lambda s, g, c, r: rrt(s, g, c, r, FAST),
-    "birrt": lambda s, g, c, r: birrt(s, g, c, r, FAST),
-    "ncrrt": lambda s, g, c, r: ncrrt(s, g, c, r, NCRRTConfig(time_limit=20.0)),
-    "ompl-rrt": pytest.param(lambda s, g, c, r: ompl_plan(s, g, c, r, OMPLConfig("RRT", time_limit=20.0)),
-                             marks=needs_ompl),
-    "ompl-rrtconnect": pytest.param(lambda s, g, c, r: ompl_plan(s, g, c, r, OMPLConfig(time_limit=20.0)),
-                                    marks=needs_ompl),
-}
-ALL = [pytest.param(name, plan, marks=getattr(plan, "marks", ()), id=name) for name, plan in PLANNERS.items()]
-
-
-def _unwrap(plan):
-    return plan.values[0] if hasattr(plan, "values") else plan
+ALL = [
+    pytest.param("rrt", lambda s, g, c, r: rrt(s, g, c, r, FAST), id="rrt"),
+    pytest.param("birrt", lambda s, g, c, r: birrt(s, g, c, r, FAST), id="birrt"),
+    pytest.param("ncrrt", lambda s, g, c, r: ncrrt(s, g, c, r, NCRRTConfig(time_limit=20.0)), id="ncrrt"),
+    pytest.param("ompl-rrt", lambda s, g, c, r: ompl_plan(s, g, c, r, OMPLConfig("RRT", time_limit=20.0)),
+                 marks=needs_ompl, id="ompl-rrt"),
+    pytest.param("ompl-rrtconnect", lambda s, g, c, r: ompl_plan(s, g, c, r, OMPLConfig(time_limit=20.0)),
+                 marks=needs_ompl, id="ompl-rrtconnect"),
+]
 
 
 @pytest.fixture(scope="module")
@@ -53,7 +48,7 @@ def _segment_collides(checker: CollisionChecker, qa, qb, resolution: float) -> b
 def test_plans_around_the_plate_and_path_is_valid_at_4x_resolution(exp1, name, plan):
     env, checker, q_start, q_goal = exp1
     assert _segment_collides(checker, q_start, q_goal, FAST.resolution)  # the direct move is blocked
-    result = _unwrap(plan)(q_start, q_goal, checker, np.random.default_rng(3))
+    result = plan(q_start, q_goal, checker, np.random.default_rng(3))
     assert result.status is Status.SOLVED, result.message
     path = np.asarray(result.path)
     np.testing.assert_array_equal(path[0], q_start)
@@ -67,8 +62,8 @@ def test_plans_around_the_plate_and_path_is_valid_at_4x_resolution(exp1, name, p
 @pytest.mark.parametrize("name,plan", ALL)
 def test_identical_seeds_give_identical_paths(exp1, name, plan):
     _, checker, q_start, q_goal = exp1
-    a = _unwrap(plan)(q_start, q_goal, checker, np.random.default_rng(11))
-    b = _unwrap(plan)(q_start, q_goal, checker, np.random.default_rng(11))
+    a = plan(q_start, q_goal, checker, np.random.default_rng(11))
+    b = plan(q_start, q_goal, checker, np.random.default_rng(11))
     assert a.solved and b.solved
     np.testing.assert_array_equal(np.asarray(a.path), np.asarray(b.path))
 
@@ -79,9 +74,9 @@ def test_goal_in_collision_and_invalid_start_are_reported_not_searched(exp1, nam
     blocker = ObstacleSpec("sphere", tuple(env.kin.fk(q_goal)[:3, 3]), radius=0.05)
     env.scene.set_obstacles([*env.scenario.obstacles, blocker])
     try:
-        result = _unwrap(plan)(q_start, q_goal, checker, np.random.default_rng(0))
+        result = plan(q_start, q_goal, checker, np.random.default_rng(0))
         assert result.status is Status.GOAL_IN_COLLISION and result.path is None and result.planning_time < 1.0
-        result = _unwrap(plan)(q_goal, q_start, checker, np.random.default_rng(0))
+        result = plan(q_goal, q_start, checker, np.random.default_rng(0))
         assert result.status is Status.INVALID_START and result.path is None
     finally:
         env.scene.set_obstacles(env.scenario.obstacles)

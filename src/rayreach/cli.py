@@ -235,12 +235,12 @@ def _evaluate(args: argparse.Namespace) -> int:
     if not args.report_only:
         evaluate(config, args.out)
     written = write_report(args.out)
-    from rayreach.evaluate.store import ResultsStore
-
-    store = ResultsStore(written["table"].parent / "results.db")
-    rows = store.rows()
-    store.close()
     if args.suite == "random":
+        from rayreach.evaluate.store import ResultsStore
+
+        store = ResultsStore(written["table"].parent / "results.db")
+        rows = store.rows()
+        store.close()
         for (experiment, planner), s in sorted(summarise(rows).items()):
             rates = ", ".join(f"{k} {v / s['runs']:.1%}" for k, v in s["outcomes"].items())
             print(f"{experiment} {planner}: {s['runs']} worlds: {rates}")

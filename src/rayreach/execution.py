@@ -24,10 +24,7 @@ from rayreach.kinematics import Kinematics
 from rayreach.planners import GlobalPlanner, PlanResult, ReactivePlanner, Status
 from rayreach.planners.collision import CollisionChecker
 from rayreach.scenarios import Scenario
-from rayreach.scenarios.feasibility import REACH_TOLERANCE, ik_seeds
-from rayreach.kinematics import IKParams
-
-GOAL_IK = IKParams(tolerance=REACH_TOLERANCE, max_iterations=200)
+from rayreach.scenarios.feasibility import goal_solutions
 
 
 @dataclass(frozen=True)
@@ -144,13 +141,10 @@ class Executor:
         """The first collision-free IK solution for ``goal`` over the seeds (``q_seed`` first),
         else the reason: unreachable (no seed converged) or in collision (all did, all collide)."""
         converged = False
-        for seed in ik_seeds(self.kin, q_seed, self.config.goal_ik_seeds, rng):
-            result = self.kin.ik(np.asarray(goal, dtype=float), None, seed, GOAL_IK)
-            if not result.converged:
-                continue
+        for q in goal_solutions(self.kin, goal, q_seed, rng, self.config.goal_ik_seeds):
             converged = True
-            if self.checker.valid(result.q):
-                return result.q, None
+            if self.checker.valid(q):
+                return q, None
         return None, Status.GOAL_IN_COLLISION if converged else Status.GOAL_UNREACHABLE
 
     def goal_configurations(self, seed: int) -> tuple[list[np.ndarray], Status | None, str]:
@@ -207,10 +201,11 @@ class Executor:
     def _plan(self, planner: GlobalPlanner, waypoints: list[np.ndarray], rng: np.random.Generator
               ) -> tuple[list[np.ndarray] | None, list[np.ndarray] | None, PlanResult]:
         """Plan every leg start -> goal 1 -> goal 2 ...; the joined path, the joined raw path
-        (before smoothing) and the last leg's result (the failing one, if any)."""
+        (before smoothing; the joined path itself when nothing was smoothed) and the last
+        leg's result (the failing one, if any)."""
         path: list[np.ndarray] = [waypoints[0]]
         raw: list[np.ndarray] = [waypoints[0]]
-        planning = 0.0
+        planning, smoothed = 0.0, False
         result: PlanResult | None = None
         for qa, qb in zip(waypoints[:-1], waypoints[1:]):
             result = planner.plan(self.checker, qa, qb, rng)
@@ -221,9 +216,10 @@ class Executor:
             assert result.path is not None
             path.extend(result.path[1:])
             raw.extend((result.raw_path or result.path)[1:])
+            smoothed = smoothed or result.raw_path is not None
         assert result is not None
         result.planning_time = planning
-        return path, raw, result
+        return path, raw if smoothed else path, result
 
     def _run_global(self, planner: GlobalPlanner, seed: int) -> RunRecord:
         q_start = self.env.q.copy()
@@ -245,7 +241,8 @@ class Executor:
         assert raw is not None
         velocity = np.asarray(self.spec.velocity)
         qs, ees = time_path(self.kin, path, velocity, self.period, self.spec.ee_step)
-        raw_length = polyline_length(time_path(self.kin, raw, velocity, self.period, self.spec.ee_step)[1])
+        raw_length = (polyline_length(ees) if raw is path
+                      else polyline_length(time_path(self.kin, raw, velocity, self.period, self.spec.ee_step)[1]))
         goal_index, replans, plan_status = 0, 0, Status.SOLVED.value
         executed_q, executed_ee = [qs[0]], [ees[0]]
         collided, message = False, ""

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import time
 from typing import Any
 
 import numpy as np
@@ -41,13 +42,17 @@ class CollisionChecker:
         return True
 
 
-def check_endpoints(checker: CollisionChecker, start: np.ndarray, goal: np.ndarray) -> Status | None:
-    """The status that stops a query before any search, or None when both ends are valid."""
+def refuse_endpoints(checker: CollisionChecker, start: np.ndarray, goal: np.ndarray, config: dict[str, Any],
+                     t0: float) -> PlanResult | None:
+    """The result that stops a query before any search (invalid start, goal in collision),
+    or None when both ends are valid; ``t0`` is when planning began (``perf_counter``)."""
     if not checker.valid(start):
-        return Status.INVALID_START
-    if not checker.valid(goal):
-        return Status.GOAL_IN_COLLISION
-    return None
+        status = Status.INVALID_START
+    elif not checker.valid(goal):
+        status = Status.GOAL_IN_COLLISION
+    else:
+        return None
+    return PlanResult(status, None, time.perf_counter() - t0, 0, config)
 
 
 def sampling_box(checker: CollisionChecker, start: np.ndarray, goal: np.ndarray,

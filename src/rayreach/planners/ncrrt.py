@@ -25,7 +25,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from rayreach.planners.collision import CollisionChecker, check_endpoints, sampling_box
+from rayreach.planners.collision import CollisionChecker, refuse_endpoints, sampling_box
 from rayreach.planners.result import PlanResult
 from rayreach.planners.rrt import RRTConfig, Tree, connect, finish, steer
 
@@ -88,9 +88,9 @@ def ncrrt(start: np.ndarray, goal: np.ndarray, checker: CollisionChecker, rng: n
           config: NCRRTConfig = NCRRTConfig()) -> PlanResult:
     """Bidirectional NC-RRT from ``start`` to ``goal``; see the module docstring."""
     t0 = time.perf_counter()
-    bad = check_endpoints(checker, start, goal)
-    if bad is not None:
-        return PlanResult(bad, None, time.perf_counter() - t0, 0, {"planner": "ncrrt", **asdict(config)})
+    refused = refuse_endpoints(checker, start, goal, {"planner": "ncrrt", **asdict(config)}, t0)
+    if refused is not None:
+        return refused
     low, high = sampling_box(checker, start, goal, config.sampling_margin)
     trees = [ControlledTree(start), ControlledTree(goal)]
     farthest = float(np.linalg.norm(high - low))

@@ -13,7 +13,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from rayreach.planners.collision import CollisionChecker, check_endpoints, finish_with_recheck, sampling_box
+from rayreach.planners.collision import CollisionChecker, finish_with_recheck, refuse_endpoints, sampling_box
 from rayreach.planners.result import PlanResult, Status
 
 OMPL_PLANNERS = ("RRT", "RRTConnect")
@@ -55,9 +55,9 @@ def ompl_plan(start: np.ndarray, goal: np.ndarray, checker: CollisionChecker, rn
 
     record = {"planner": f"ompl-{config.algorithm.lower()}", **asdict(config)}
     t0 = time.perf_counter()
-    bad = check_endpoints(checker, start, goal)
-    if bad is not None:
-        return PlanResult(bad, None, time.perf_counter() - t0, 0, record)
+    refused = refuse_endpoints(checker, start, goal, record, t0)
+    if refused is not None:
+        return refused
 
     ou.setLogLevel(ou.LOG_NONE)
     ou.RNG.setSeed(int(rng.integers(1, 2**31 - 1)))

@@ -12,7 +12,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from rayreach.planners.collision import CollisionChecker, check_endpoints, finish_with_recheck, sampling_box
+from rayreach.planners.collision import CollisionChecker, finish_with_recheck, refuse_endpoints, sampling_box
 from rayreach.planners.result import PlanResult, Status
 
 
@@ -88,9 +88,9 @@ def rrt(start: np.ndarray, goal: np.ndarray, checker: CollisionChecker, rng: np.
         config: RRTConfig = RRTConfig()) -> PlanResult:
     """Goal-biased RRT from ``start``; solved once an edge reaches ``goal`` exactly."""
     t0 = time.perf_counter()
-    bad = check_endpoints(checker, start, goal)
-    if bad is not None:
-        return PlanResult(bad, None, time.perf_counter() - t0, 0, {"planner": "rrt", **asdict(config)})
+    refused = refuse_endpoints(checker, start, goal, {"planner": "rrt", **asdict(config)}, t0)
+    if refused is not None:
+        return refused
     tree = Tree(start)
     low, high = sampling_box(checker, start, goal, config.sampling_margin)
     iterations = 0
@@ -125,9 +125,9 @@ def birrt(start: np.ndarray, goal: np.ndarray, checker: CollisionChecker, rng: n
     """Bidirectional RRT (RRT-Connect): trees from start and goal take turns growing one step
     towards a random sample, and the other tree then greedily connects to the new node."""
     t0 = time.perf_counter()
-    bad = check_endpoints(checker, start, goal)
-    if bad is not None:
-        return PlanResult(bad, None, time.perf_counter() - t0, 0, {"planner": "birrt", **asdict(config)})
+    refused = refuse_endpoints(checker, start, goal, {"planner": "birrt", **asdict(config)}, t0)
+    if refused is not None:
+        return refused
     trees = [Tree(start), Tree(goal)]
     low, high = sampling_box(checker, start, goal, config.sampling_margin)
     iterations = 0

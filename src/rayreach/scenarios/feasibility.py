@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Sequence
+from typing import Iterator, Sequence
 
 import numpy as np
 
@@ -46,16 +46,23 @@ def solve_start(scenario: Scenario, kin: Kinematics, n_random_seeds: int = 8) ->
     )
 
 
-def goal_configuration(
+def goal_solutions(
     kin: Kinematics, goal: Sequence[float], q_seed: np.ndarray, rng: np.random.Generator, n_random_seeds: int = 8
-) -> np.ndarray | None:
-    """A configuration whose tool tip is at ``goal`` (position only), or None."""
+) -> Iterator[np.ndarray]:
+    """Configurations whose tool tip is at ``goal`` (position only), one per converged seed,
+    in seed order (``q_seed`` first)."""
     target = np.asarray(goal, dtype=float)
     for seed in ik_seeds(kin, q_seed, n_random_seeds, rng):
         result = kin.ik(target, None, seed, _REACH_IK)
         if result.converged:
-            return result.q
-    return None
+            yield result.q
+
+
+def goal_configuration(
+    kin: Kinematics, goal: Sequence[float], q_seed: np.ndarray, rng: np.random.Generator, n_random_seeds: int = 8
+) -> np.ndarray | None:
+    """The first of :func:`goal_solutions`, or None."""
+    return next(goal_solutions(kin, goal, q_seed, rng, n_random_seeds), None)
 
 
 def validate(scenario: Scenario, kin: Kinematics, scene: Scene, q_start: np.ndarray) -> None:
