@@ -546,3 +546,31 @@ def test_rotvec_helper_used_by_actions_is_consistent():
     """The action rotation is rotvec_to_matrix(delta) applied on the left (world axes)."""
     delta = np.array([0.0, 0.0, 0.005])
     np.testing.assert_allclose(matrix_to_rotvec(rotvec_to_matrix(delta)), delta, atol=1e-15)
+
+
+def test_true_goal_share_plays_that_share_of_random_episodes_at_the_true_size():
+    """With an enormous curriculum goal every episode but the true-size ones ends at once."""
+    env = ReachEnv(robot="ur5", goal_tolerance=5.0, true_goal_share=0.5, true_goal_tolerance=0.01)
+    try:
+        flags = []
+        for seed in range(40):
+            env.reset(seed=seed)
+            _, _, terminated, _, info = env.step(np.zeros(6, dtype=np.float32))
+            assert info["goal_tolerance"] == (0.01 if info["true_goal_episode"] else 5.0)
+            assert info["is_success"] == (not info["true_goal_episode"])
+            flags.append(info["true_goal_episode"])
+        assert 10 <= sum(flags) <= 30
+    finally:
+        env.close()
+
+
+def test_true_goal_share_never_applies_to_fixed_scenarios_and_is_validated():
+    env = ReachEnv(scenario="exp1", goal_tolerance=0.5, true_goal_share=1.0)
+    try:
+        env.reset(seed=0)
+        _, _, _, _, info = env.step(np.zeros(6, dtype=np.float32))
+        assert info["is_success"] and not info["true_goal_episode"] and info["goal_tolerance"] == 0.5
+    finally:
+        env.close()
+    with pytest.raises(ValueError, match="true_goal_share"):
+        ReachEnv(robot="ur5", true_goal_share=1.5)

@@ -14,7 +14,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from rayreach.curriculum import AugmentedGoalSize, ObstacleCurriculum
 from rayreach.policy import CheckpointError, load_policy, read_bundle_meta
+from rayreach.train import TrainState, append_curve
 
 RAYREACH = [sys.executable, "-m", "rayreach.cli"]
 
@@ -46,10 +48,12 @@ def test_train_kill_resume_rollout(tmp_path):
     assert norm is not None and norm["obs_mean"].shape == (142,)
     assert not (out / "model.zip").exists()
 
-    done = _run(*_train_args(out, 6144), "--resume")
+    assert meta["config"]["true_goal_share"] == 0.5
+    done = _run(*_train_args(out, 6144), "--resume", "--true-goal-share", "0.25")
     assert done.returncode == 0, done.stderr[-2000:]
     final, _ = read_bundle_meta(out / "model.zip")
     assert final["kind"] == "model" and final["timesteps"] >= 6144
+    assert final["config"]["true_goal_share"] == 0.25  # a resumed part may change the share
     assert final["state"]["episodes"] >= meta["state"]["episodes"]  # the curriculum went on
     with (out / "curve.csv").open() as handle:
         steps = [int(row["timesteps"]) for row in csv.DictReader(handle)]
@@ -94,3 +98,26 @@ def test_resume_refuses_another_robot(tmp_path):
     wrong_scene = _run("rollout", "--model", str(out / "model.zip"), "--scenario", "exp4")
     assert wrong_scene.returncode == 2 and "kr16" in wrong_scene.stderr
     assert os.path.exists(out / "model.zip")
+
+
+def test_curve_from_an_older_version_gains_new_columns(tmp_path):
+    path = tmp_path / "curve.csv"
+    append_curve(path, {"timesteps": 1, "success_rate": 0.5})
+    append_curve(path, {"timesteps": 2, "success_rate": 0.6, "true_success_rate": 0.1})
+    append_curve(path, {"timesteps": 3, "success_rate": 0.7, "true_success_rate": 0.2})
+    with path.open() as handle:
+        rows = list(csv.DictReader(handle))
+    assert [r["timesteps"] for r in rows] == ["1", "2", "3"]
+    assert [r["true_success_rate"] for r in rows] == ["", "0.1", "0.2"]
+    assert [r["success_rate"] for r in rows] == ["0.5", "0.6", "0.7"]
+
+
+def test_train_state_keeps_true_size_outcomes_apart():
+    state = TrainState(AugmentedGoalSize(), ObstacleCurriculum())
+    for outcome, true_size in (("success", False), ("collision", True), ("success", True), ("timeout", False)):
+        state.record(outcome, true_size)
+    assert state.episodes == 4
+    assert state.rate("success") == 0.5 and state.rate("success", true_size=True) == 0.5
+    assert state.rate("collision", true_size=True) == 0.5
+    again = TrainState.from_dict(state.to_dict())
+    assert list(again.recent_true) == ["collision", "success"] and again.episodes == 4

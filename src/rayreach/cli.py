@@ -89,6 +89,9 @@ def build_parser() -> argparse.ArgumentParser:
     train.add_argument("--separate-features", action="store_true", help="actor and critic get their own extractor")
     train.add_argument("--obstacles", type=int, default=None, help="fix the obstacle count (no obstacle curriculum)")
     train.add_argument("--goal-size", type=float, default=None, help="fix the goal size, m (no goal curriculum)")
+    train.add_argument("--true-goal-share", type=float, default=None,
+                       help="share of episodes at the true goal size while the goal is enlarged (default 0.5; "
+                            "also changes a resumed run)")
 
     roll = sub.add_parser("rollout", help="run a saved policy and report success, collisions, path length")
     roll.add_argument("--model", required=True, help="a model or checkpoint .zip")
@@ -299,8 +302,12 @@ def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
                                                           maximum=args.obstacles))
     if args.goal_size is not None:
         config = replace(config, goal=GoalSizeParams(rho=args.goal_size, e_zeta=2**62))
+    overrides = {}
+    if args.true_goal_share is not None:
+        overrides["true_goal_share"] = args.true_goal_share
+        config = replace(config, **overrides)
     command = "rayreach " + " ".join(sys.argv[1:] if argv is None else argv)
-    path = train(config, args.out, resume=args.resume, command=command)
+    path = train(config, args.out, resume=args.resume, command=command, resume_overrides=overrides)
     print(f"model: {path}")
     return 0
 

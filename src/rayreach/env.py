@@ -69,6 +69,11 @@ class EnvConfig:
 
     goal_tolerance: float = 0.01
     """Success radius, m (the paper's final target size; the training curriculum changes it)."""
+    true_goal_share: float = 0.0
+    """Share of random-world episodes played at ``true_goal_tolerance`` whatever
+    ``goal_tolerance`` the curriculum set (training: the policy keeps practising the last
+    centimetre while the goal is enlarged); 0 for fixed scenarios and evaluation."""
+    true_goal_tolerance: float = 0.01
     max_steps: int = 1024
     """Step budget per episode."""
     control_period: float = 1.0 / 240.0
@@ -85,6 +90,8 @@ class EnvConfig:
     def __post_init__(self) -> None:
         if not self.goal_tolerance > 0:
             raise ValueError(f"goal_tolerance must be positive, got {self.goal_tolerance}")
+        if not 0.0 <= self.true_goal_share <= 1.0:
+            raise ValueError(f"true_goal_share must be in [0, 1], got {self.true_goal_share}")
         if self.max_steps < 1:
             raise ValueError(f"max_steps must be >= 1, got {self.max_steps}")
         if not self.control_period > 0:
@@ -191,6 +198,9 @@ class ReachEnv(gym.Env):
         else:
             assert self._fixed_start is not None
             q_start = self._fixed_start
+        share = self.config.true_goal_share if self.random else 0.0
+        self.true_goal_episode = share > 0 and bool(self.np_random.random() < share)
+        self.tolerance = self.config.true_goal_tolerance if self.true_goal_episode else self.config.goal_tolerance
         self.scene.set_time(0.0)
         self.q = np.array(q_start, dtype=float)
         self.scene.set_joints(self.q)
@@ -238,12 +248,12 @@ class ReachEnv(gym.Env):
 
         goal = self.goals[self.goal_index]
         distance = float(np.linalg.norm(goal - self.ee_pos))
-        reached = distance < cfg.goal_tolerance
+        reached = distance < self.tolerance
         n_shakes = self._shake.update(distance)
         rays = self._cast_rays()
         w = cfg.rewards
         terms = {
-            "success": R.success_reward(distance, cfg.goal_tolerance, w),
+            "success": R.success_reward(distance, self.tolerance, w),
             "collision": R.collision_reward(collided, w),
             "distance": R.distance_reward(distance, w),
             "shaking": R.shaking_reward(n_shakes, w),
@@ -272,6 +282,8 @@ class ReachEnv(gym.Env):
             "collision": collided,
             "out_of_bounds": outside,
             "goal_reached": reached,
+            "goal_tolerance": self.tolerance,
+            "true_goal_episode": self.true_goal_episode,
             "goal_index": self.goal_index,
             "ee_position": self.ee_pos.copy(),
             "goal": self.goals[self.goal_index].copy(),

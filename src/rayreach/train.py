@@ -74,6 +74,9 @@ class TrainConfig:
     """Weight of the progress term d_{t-1} - d_t; 0 is the paper's reward alone."""
     proximity_weight: float = -0.1
     """Weight of the proximity term (rays shorter than 0.1 m); 0 is the paper's reward alone."""
+    true_goal_share: float = 0.5
+    """Share of episodes played at the true goal size rho_min while the curriculum enlarges
+    the goal (not in the paper; docs/training.md). They do not feed the goal-size curriculum."""
     checkpoint_every: int = 100_000
     goal: GoalSizeParams = field(default_factory=GoalSizeParams)
     obstacles: ObstacleParams = field(default_factory=ObstacleParams)
@@ -92,6 +95,8 @@ def make_env_fn(config: TrainConfig, rank: int):
 
         env_config = EnvConfig(
             goal_tolerance=config.goal.rho,
+            true_goal_share=config.true_goal_share,
+            true_goal_tolerance=config.goal.rho_min,
             max_steps=config.max_episode_steps,
             rewards=replace(RewardWeights(), progress=config.progress_weight, proximity=config.proximity_weight),
             random_world=RandomWorldConfig(n_obstacles=config.obstacles.start),
@@ -170,9 +175,18 @@ class TrainState:
     episodes: int = 0
     recent: deque = field(default_factory=lambda: deque(maxlen=RECENT))
     """Outcomes of the last episodes (for the rates shown and logged)."""
+    recent_true: deque = field(default_factory=lambda: deque(maxlen=RECENT))
+    """Outcomes of the last episodes played at the true goal size."""
 
-    def rate(self, outcome: str) -> float:
-        return sum(o == outcome for o in self.recent) / len(self.recent) if self.recent else float("nan")
+    def rate(self, outcome: str, true_size: bool = False) -> float:
+        recent = self.recent_true if true_size else self.recent
+        return sum(o == outcome for o in recent) / len(recent) if recent else float("nan")
+
+    def record(self, outcome: str, at_true_size: bool) -> None:
+        self.episodes += 1
+        self.recent.append(outcome)
+        if at_true_size:
+            self.recent_true.append(outcome)
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -181,6 +195,7 @@ class TrainState:
             "wall_time": self.wall_time,
             "episodes": self.episodes,
             "recent": list(self.recent),
+            "recent_true": list(self.recent_true),
         }
 
     @classmethod
@@ -191,6 +206,7 @@ class TrainState:
             float(data["wall_time"]),
             int(data["episodes"]),
             deque(data.get("recent", []), maxlen=RECENT),
+            deque(data.get("recent_true", []), maxlen=RECENT),
         )
 
 
@@ -241,18 +257,19 @@ def _make_callback(config: TrainConfig, state: TrainState, out: Path, total: int
                     sums[key] = sums.get(key, 0.0) + value
                 if done:
                     success = bool(info.get("is_success"))
-                    at_true_size = state.goal.size <= state.goal.params.rho_min + 1e-9
-                    state.goal.record(success)
+                    at_true_size = info.get("goal_tolerance", state.goal.size) <= state.goal.params.rho_min + 1e-9
+                    if not info.get("true_goal_episode"):
+                        state.goal.record(success)
                     state.obstacles.record(success, at_true_size=at_true_size)
-                    state.episodes += 1
-                    state.recent.append(episode_outcome(info))
+                    state.record(episode_outcome(info), at_true_size)
                     self.finished_terms.append(dict(sums))
                     sums.clear()
             if state.goal.size != size or state.obstacles.count != count:
                 self._push(goal=state.goal.size != size, obstacles=state.obstacles.count != count)
             self.bar.update(self.training_env.num_envs)
             if self.n_calls % 20 == 0 and state.recent:
-                self.bar.set_postfix(success=f"{state.rate('success'):.2f}", goal=f"{state.goal.size:.3f}",
+                self.bar.set_postfix(success=f"{state.rate('success'):.2f}",
+                                     true=f"{state.rate('success', true_size=True):.2f}", goal=f"{state.goal.size:.3f}",
                                      obstacles=state.obstacles.count, refresh=False)
             if self.num_timesteps >= self.next_checkpoint:
                 self.save_checkpoint()
@@ -267,6 +284,9 @@ def _make_callback(config: TrainConfig, state: TrainState, out: Path, total: int
             for outcome in OUTCOMES:
                 row[f"{outcome}_rate"] = round(state.rate(outcome), 4)
                 self.logger.record(f"rollout/{outcome}_rate", row[f"{outcome}_rate"])
+            for outcome in ("success", "collision"):
+                row[f"true_{outcome}_rate"] = round(state.rate(outcome, true_size=True), 4)
+                self.logger.record(f"rollout/true_{outcome}_rate", row[f"true_{outcome}_rate"])
             for key in REWARD_TERMS:  # mean per episode over the last finished episodes
                 terms = [t.get(key, 0.0) for t in self.finished_terms]
                 row[f"reward_{key}"] = round(float(np.mean(terms)), 4) if terms else float("nan")
@@ -291,9 +311,23 @@ def _make_callback(config: TrainConfig, state: TrainState, out: Path, total: int
 
 
 def append_curve(path: Path, row: dict[str, Any]) -> None:
+    """Append one row; a curve written by an older version gains the new columns (empty in
+    its old rows) so that a resumed run keeps one consistent file."""
+    fieldnames = list(row)
+    if path.exists():
+        with path.open(newline="") as handle:
+            header = next(csv.reader(handle), [])
+        if header != fieldnames:
+            with path.open(newline="") as handle:
+                rows = list(csv.DictReader(handle))
+            fieldnames = header + [k for k in row if k not in header]
+            with path.open("w", newline="") as handle:
+                writer = csv.DictWriter(handle, fieldnames=fieldnames)
+                writer.writeheader()
+                writer.writerows(rows)
     new = not path.exists()
     with path.open("a", newline="") as handle:
-        writer = csv.DictWriter(handle, fieldnames=list(row))
+        writer = csv.DictWriter(handle, fieldnames=fieldnames, restval="")
         if new:
             writer.writeheader()
         writer.writerow(row)
@@ -333,8 +367,12 @@ def config_from_meta(meta: dict[str, Any]) -> TrainConfig:
 
 
 # ---------------------------------------------------------------------- entry point
-def train(config: TrainConfig, out: str | Path, resume: bool = False, command: str = "") -> Path:
-    """Train (or resume) into ``out``; returns the path of the final model bundle."""
+def train(config: TrainConfig, out: str | Path, resume: bool = False, command: str = "",
+          resume_overrides: dict[str, Any] | None = None) -> Path:
+    """Train (or resume) into ``out``; returns the path of the final model bundle.
+
+    A resumed run keeps its saved configuration except ``timesteps``, ``workers`` and the
+    fields named in ``resume_overrides`` (e.g. a new ``true_goal_share`` for a second part)."""
     out = Path(out)
     checkpoint = out / CHECKPOINT
     from stable_baselines3 import PPO
@@ -348,7 +386,7 @@ def train(config: TrainConfig, out: str | Path, resume: bool = False, command: s
         saved = config_from_meta(meta)
         if saved.robot != config.robot:
             raise CheckpointError(f"{checkpoint} trains robot '{saved.robot}', not '{config.robot}'")
-        config = replace(saved, timesteps=config.timesteps, workers=config.workers)
+        config = replace(saved, timesteps=config.timesteps, workers=config.workers, **(resume_overrides or {}))
         state = TrainState.from_dict(meta["state"])
     else:
         if checkpoint.exists():
@@ -420,6 +458,9 @@ def plot_curve(csv_path: Path, png_path: Path, title: str) -> Path | None:
     fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(8, 6), sharex=True, gridspec_kw={"height_ratios": [2, 1]})
     for outcome, color in zip(OUTCOMES, ("#2b9a3e", "#d62728", "#ff7f0e", "#7f7f7f")):
         ax1.plot(steps, [float(r[f"{outcome}_rate"]) for r in rows], color=color, label=outcome.replace("_", " "))
+    true_success = [float(r.get("true_success_rate") or "nan") for r in rows]
+    if not np.all(np.isnan(true_success)):
+        ax1.plot(steps, true_success, color="#2b9a3e", linestyle="--", label="success at the true goal size")
     ax1.set_ylabel("share of last 200 episodes")
     ax1.set_ylim(-0.02, 1.02)
     ax1.legend(loc="center right", fontsize=8)
