@@ -8,9 +8,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from rayreach.env import N_ROBOT_OBS, OBS_SIZE
 from rayreach.execution import Executor
 from rayreach.planners import make_planner
 from rayreach.planners.drl import MODELS_DIR
+from rayreach.policy import FinalApproach
 
 CASES = [("ur5", "exp1"), ("kr16", "exp4")]
 
@@ -27,6 +29,28 @@ def test_shipped_policy_loads_with_metadata_and_runs_an_episode(robot, scenario)
     assert record.outcome in {"success", "collision", "timeout", "out of bounds"}
     assert 0 < record.steps <= 1024 and record.config["timesteps"] == meta["timesteps"]
     assert np.isfinite(record.ee_path).all()
+
+
+def test_shipped_ur5_policy_reaches_exp1_at_the_true_goal_size():
+    with Executor("exp1") as ex:
+        record = ex.run(make_planner("drl", "ur5"), seed=0)
+    assert record.outcome == "success" and not record.collision
+    assert record.path_length < 0.6  # the straight line is 0.37 m; the paper's DRL path 0.45 m
+
+
+def test_final_approach_steps_straight_only_near_the_goal_and_clear_of_obstacles():
+    approach = FinalApproach(radius=0.05, clearance=0.05, ee_step=0.005, ray_range=0.4)
+    obs = np.zeros(OBS_SIZE, dtype=np.float32)
+    obs[N_ROBOT_OBS:] = 1.0  # nothing within ray range
+    obs[6:9] = (0.03, -0.002, 0.0)
+    obs[12] = np.linalg.norm(obs[6:9])
+    np.testing.assert_allclose(approach.action(obs), [1.0, -0.4, 0.0, 0.0, 0.0, 0.0], atol=1e-6)
+    far = obs.copy()
+    far[6:9], far[12] = (0.06, 0.0, 0.0), 0.06
+    assert approach.action(far) is None
+    crowded = obs.copy()
+    crowded[N_ROBOT_OBS + 40] = 0.1  # something 4 cm from a ray origin
+    assert approach.action(crowded) is None
 
 
 def test_a_drl_model_for_the_other_robot_is_refused():

@@ -100,6 +100,8 @@ def build_parser() -> argparse.ArgumentParser:
     roll.add_argument("--stochastic", action="store_true", help="sample actions instead of the mean")
     roll.add_argument("--tolerance", type=float, default=0.01, help="goal tolerance, m (paper: 0.01)")
     roll.add_argument("--obstacles", type=int, default=None, help="obstacles per random world")
+    roll.add_argument("--no-final-approach", action="store_true",
+                      help="the policy alone, without the straight final approach inside 5 cm")
     roll.add_argument("--json", action="store_true", help="print one JSON line")
 
     export = sub.add_parser("export", help="copy a run's model (or latest checkpoint) to a shipped file + JSON")
@@ -313,14 +315,17 @@ def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
 
 
 def _rollout(args: argparse.Namespace, scenario: str) -> int:
+    from rayreach.policy import FinalApproach
     from rayreach.rollout import rollout
 
     summary = rollout(args.model, scenario, episodes=args.episodes, deterministic=not args.stochastic,
-                      goal_tolerance=args.tolerance, n_obstacles=args.obstacles, progress=not args.json)
+                      goal_tolerance=args.tolerance, n_obstacles=args.obstacles, progress=not args.json,
+                      final_approach=None if args.no_final_approach else FinalApproach())
     if args.json:
         print(json.dumps({"scenario": scenario, **summary.to_dict()}))
         return 0
-    mode = "deterministic" if summary.deterministic else "stochastic"
+    mode = ("deterministic" if summary.deterministic else "stochastic") + (
+        ", final approach" if summary.final_approach else ", policy alone")
     print(f"{scenario}: {summary.episodes} episodes ({mode}), success {summary.success_rate:.1%}, "
           f"collisions {summary.collision_rate:.1%}, mean path {summary.path_length_mean:.3f} m, "
           f"mean steps {summary.steps_mean:.0f}")

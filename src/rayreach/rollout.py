@@ -9,7 +9,7 @@ import numpy as np
 from tqdm import tqdm
 
 from rayreach.env import ReachEnv
-from rayreach.policy import load_policy
+from rayreach.policy import FinalApproach, load_policy
 from rayreach.scenarios import RANDOM
 
 EVAL_SEED_OFFSET = 1_000_000
@@ -27,6 +27,7 @@ class RolloutSummary:
     successes: int
     collisions: int
     deterministic: bool
+    final_approach: bool
     per_episode: list[dict] = field(default_factory=list)
 
     def to_dict(self, with_episodes: bool = False) -> dict:
@@ -45,10 +46,12 @@ def rollout(
     n_obstacles: int | None = None,
     seed: int = EVAL_SEED_OFFSET,
     progress: bool = True,
+    final_approach: FinalApproach | None = FinalApproach(),
 ) -> RolloutSummary:
     """``episodes`` episodes of the policy at ``goal_tolerance``. Random worlds use the
-    final obstacle count of training unless ``n_obstacles`` is given."""
-    policy = load_policy(model)
+    final obstacle count of training unless ``n_obstacles`` is given. ``final_approach``
+    None measures the policy alone."""
+    policy = load_policy(model, final_approach=final_approach)
     env = ReachEnv(robot=policy.robot, scenario=scenario, goal_tolerance=goal_tolerance)
     if scenario == RANDOM:
         trained = policy.meta.get("state", {}).get("obstacles", {}).get("count", 0)
@@ -81,5 +84,6 @@ def rollout(
         successes=successes,
         collisions=collisions,
         deterministic=deterministic,
+        final_approach=final_approach is not None,
         per_episode=records,
     )
