@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 from stable_baselines3.common.vec_env import DummyVecEnv
 
@@ -40,3 +42,37 @@ def test_worker_vec_env_matches_dummy_vec_env_and_routes_attributes():
     finally:
         workers.close()
         dummy.close()
+
+
+class _InterruptOnce:
+    """A worker connection whose first recv() is hit by Ctrl-C (as SIGTERM is in training)."""
+
+    def __init__(self, remote) -> None:
+        self.remote, self.fired = remote, False
+
+    def recv(self):
+        if not self.fired:
+            self.fired = True
+            raise KeyboardInterrupt
+        return self.remote.recv()
+
+    def __getattr__(self, name):
+        return getattr(self.remote, name)
+
+
+def test_close_after_an_interrupt_between_two_replies_does_not_hang():
+    config = TrainConfig(envs=2)
+    venv = WorkerVecEnv([make_env_fn(config, i) for i in range(2)], n_workers=2)
+    venv.reset()
+    venv.remotes[1] = _InterruptOnce(venv.remotes[1])
+    venv.step_async(np.zeros((2, 6), dtype=np.float32))
+    try:
+        venv.step_wait()
+    except KeyboardInterrupt:
+        pass
+    else:
+        raise AssertionError("the interrupt did not reach step_wait")
+    start = time.monotonic()
+    venv.close()  # used to wait forever for the reply already read from the first worker
+    assert time.monotonic() - start < 5
+    assert not any(p.is_alive() for p in venv.processes)

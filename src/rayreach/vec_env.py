@@ -88,16 +88,22 @@ class WorkerVecEnv(VecEnv):
         observation_space, action_space = self.remotes[0].recv()
         self.closed = False
         self.waiting = False
+        self._pending: list = []
+        """Remotes whose reply to the last step has not been read yet."""
         super().__init__(n_envs, observation_space, action_space)
 
     # ------------------------------------------------------------------ stepping
     def step_async(self, actions: np.ndarray) -> None:
         for remote, part in zip(self.remotes, self._slices):
             remote.send(("step", actions[part]))
+        self._pending = list(self.remotes)
         self.waiting = True
 
     def step_wait(self):
-        results = [remote.recv() for remote in self.remotes]
+        results = []
+        for remote in self.remotes:
+            results.append(remote.recv())
+            self._pending.remove(remote)  # a Ctrl-C between two replies must not leave close() waiting
         self.waiting = False
         obs = np.concatenate([r[0] for r in results])
         rewards = np.concatenate([r[1] for r in results])
@@ -117,8 +123,8 @@ class WorkerVecEnv(VecEnv):
     def close(self) -> None:
         if self.closed:
             return
-        if self.waiting:
-            for remote in self.remotes:
+        for remote in self._pending:  # replies still owed by a step interrupted midway
+            if remote.poll(10):
                 remote.recv()
         for remote in self.remotes:
             try:
@@ -127,6 +133,8 @@ class WorkerVecEnv(VecEnv):
                 pass
         for process in self.processes:
             process.join(timeout=10)
+            if process.is_alive():
+                process.terminate()
         self.closed = True
 
     # ------------------------------------------------------------------ attribute access
