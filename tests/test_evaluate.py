@@ -132,6 +132,8 @@ def test_table_means_are_over_successes_and_best_is_bold():
     table = markdown_table(rows)
     assert "**3.00 ± 1.00**" in table and "| exp1 | / | **" not in table
     assert "2/3 (1 coll.)" in table and "0/1 (0 coll.)" in table
+    random_only = markdown_table([{**r, "experiment": "random-ur5"} for r in rows])
+    assert "| experiment | rrt | ncrrt |\n" in random_only  # no empty paper columns
 
 
 def test_resample_is_even_in_arc_length():

@@ -87,7 +87,7 @@ def markdown_table(rows: list[dict[str, Any]]) -> str:
     lines = []
     for metric, (title, unit) in METRICS.items():
         lines += [f"### Mean {title} in [{unit}] over successful runs (± std)", "",
-                  "| experiment | " + " | ".join(planners) + " | " + " | ".join(f"paper {PAPER_NAMES[p]}" for p in paper_cols) + " |",
+                  "| " + " | ".join(["experiment", *planners, *(f"paper {PAPER_NAMES[p]}" for p in paper_cols)]) + " |",
                   "|---" * (1 + len(planners) + len(paper_cols)) + "|"]
         for e in experiments:
             means = {p: stats[(e, p)][metric][0] for p in planners if (e, p) in stats and stats[(e, p)][metric]}
