@@ -33,11 +33,6 @@ class DRLPlanner(ReactivePlanner):
 
     def __init__(self, model: str | Path, deterministic: bool = True,
                  final_approach: FinalApproach | None = FinalApproach()) -> None:
-        import torch
-
-        # one observation per call: intra-op threads add overhead and, in an evaluation's
-        # worker pool, spin against the other workers (exp3 runs took 1.4 to 9.8 s)
-        torch.set_num_threads(1)
         self.policy = load_policy(model, final_approach=final_approach)
         self.deterministic = deterministic
 
