@@ -19,6 +19,8 @@ from typing import Any
 
 import numpy as np
 
+from rayreach.sensors import RAY_RANGE
+
 META_ENTRY = "rayreach/meta.json"
 NORM_ENTRY = "rayreach/normalization.npz"
 FORMAT = 1
@@ -139,7 +141,7 @@ class FinalApproach:
     clearance: float = 0.05
     ee_step: float = 0.005
     """The robot's largest translation per action, m (``load_policy`` sets it from the spec)."""
-    ray_range: float = 0.4
+    ray_range: float = RAY_RANGE
 
     def action(self, obs: np.ndarray) -> np.ndarray | None:
         """The straight step for this observation, or None to leave it to the policy."""

@@ -87,7 +87,6 @@ class WorkerVecEnv(VecEnv):
         self.remotes[0].send(("spaces", None))
         observation_space, action_space = self.remotes[0].recv()
         self.closed = False
-        self.waiting = False
         self._pending: list = []
         """Remotes whose reply to the last step has not been read yet."""
         super().__init__(n_envs, observation_space, action_space)
@@ -97,14 +96,12 @@ class WorkerVecEnv(VecEnv):
         for remote, part in zip(self.remotes, self._slices):
             remote.send(("step", actions[part]))
         self._pending = list(self.remotes)
-        self.waiting = True
 
     def step_wait(self):
         results = []
         for remote in self.remotes:
             results.append(remote.recv())
             self._pending.remove(remote)  # a Ctrl-C between two replies must not leave close() waiting
-        self.waiting = False
         obs = np.concatenate([r[0] for r in results])
         rewards = np.concatenate([r[1] for r in results])
         dones = np.concatenate([r[2] for r in results])
