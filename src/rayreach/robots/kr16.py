@@ -46,6 +46,6 @@ KR16 = RobotSpec(
     },
     workspace_low=(-0.8, -0.4, 0.4),
     workspace_high=(0.8, 0.8, 1.8),
-    training_kinds=("shelf", "plate", "box", "sphere", "goal_wall"),
+    training_kinds=("shelf", "shelf", "shelf", "plate", "box", "sphere", "goal_wall"),  # the shelf in 3 of 7 draws
     tool_rpy=(math.pi, math.pi / 3.0, -math.pi / 2.0),  # the home pose: tool 30 deg below horizontal, +y
 )

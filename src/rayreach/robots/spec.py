@@ -88,7 +88,7 @@ class RobotSpec:
     """Default workspace bounds (world frame) for random training worlds."""
     tool_rpy: tuple[float, float, float] = (math.pi, 0.0, math.pi)
     """Default tool orientation (world roll-pitch-yaw) for random start poses."""
-    training_kinds: tuple[str, ...] = ("plate", "moving_plate", "box", "sphere", "goal_cover", "goal_wall")
+    training_kinds: tuple[str, ...] = ("plate", "moving_plate", "box", "sphere", "goal_cover", "goal_wall", "goal_slot")
     """Obstacle kinds of random training worlds (see ``scenarios.random_world.KINDS``)."""
     ee_step: float = 0.005
     """Largest end-effector translation per action, m (paper: 0.005 for both robots)."""

@@ -18,11 +18,12 @@ from rayreach.scenarios.schema import ObstacleSpec, Scenario, StartSpec
 from rayreach.scene import Scene
 from rayreach.transforms import rpy_to_matrix
 
-KINDS = ("plate", "moving_plate", "box", "sphere", "shelf", "goal_cover", "goal_wall")
+KINDS = ("plate", "moving_plate", "box", "sphere", "shelf", "goal_cover", "goal_wall", "goal_slot")
 """plate / moving_plate: upright or flat plates across the straight path (moving sideways);
 box, sphere: clutter near the path; shelf: a 2 x 2 shelf holding the goal; goal_cover: a flat
-plate over the goal, high enough for the tool to pass under, or low and moving away (as in
-exp3); goal_wall: an upright plate beside the goal."""
+plate just over the goal that moves away (as in exp3); goal_wall: an upright plate beside the
+goal; goal_slot: two parallel upright plates either side of the goal (as in exp2). A kind
+listed twice in a robot's ``training_kinds`` is drawn twice as often."""
 
 
 @dataclass(frozen=True)
@@ -104,7 +105,8 @@ class RandomWorlds:
                 goal = rng.uniform(self.low, self.high)
             if np.linalg.norm(goal - start) < self.config.min_goal_distance or not self._inside(goal):
                 continue
-            obstacles += [self._obstacle(kind, rng, start, goal, i) for i, kind in enumerate(kinds)]
+            for i, kind in enumerate(kinds):
+                obstacles += self._goal_slot(rng, goal, i) if kind == "goal_slot" else [self._obstacle(kind, rng, start, goal, i)]
             q_goal = goal_configuration(self.kin, goal, q_start, rng, n_random_seeds=2)
             if q_goal is None:
                 continue
@@ -144,6 +146,12 @@ class RandomWorlds:
         goal = np.array([cx, cy + depth_offset, cz]) + rng.uniform(-0.1, 0.1, 3) * np.array([1.0, 0.0, 1.0])
         return boxes, goal
 
+    def _goal_slot(self, rng: np.random.Generator, goal: np.ndarray, index: int) -> list[ObstacleSpec]:
+        side = float(rng.uniform(0, math.pi))
+        scale = float(rng.uniform(0.8, 1.2))
+        return [_wall_beside(goal, side + turn, float(rng.uniform(0.08, 0.12)), scale, f"goal_slot_{index}_{j}")
+                for j, turn in enumerate((0.0, math.pi))]
+
     def _obstacle(
         self, kind: str, rng: np.random.Generator, start: np.ndarray, goal: np.ndarray, index: int
     ) -> ObstacleSpec:
@@ -168,25 +176,26 @@ class RandomWorlds:
             return ObstacleSpec("box", centre, rpy=rpy, half_extents=half, velocity=velocity, travel=travel,
                                 name=f"{kind}_{index}")
         if kind == "goal_cover":
-            half = (0.05 * scale, 0.05 * scale, 0.002)
-            if rng.random() < 0.5:  # static, above the tool's length: reach in from the side
-                lift = float(rng.uniform(0.16, 0.22))
-                return ObstacleSpec("box", (float(goal[0]), float(goal[1]), float(goal[2]) + lift), half_extents=half,
-                                    name=f"goal_cover_{index}")
+            # A static cover was dropped: one low enough to matter sits where the wrist of a
+            # down-pointing tool must be, unseen by every ray (docs/training.md).
             lift = float(rng.uniform(0.04, 0.07))
             direction = float(rng.uniform(0, 2 * math.pi))
             speed = float(rng.uniform(*self.config.speed))
-            return ObstacleSpec("box", (float(goal[0]), float(goal[1]), float(goal[2]) + lift), half_extents=half,
+            return ObstacleSpec("box", (float(goal[0]), float(goal[1]), float(goal[2]) + lift),
+                                half_extents=(0.05 * scale, 0.05 * scale, 0.002),
                                 velocity=(speed * math.cos(direction), speed * math.sin(direction), 0.0),
                                 name=f"goal_cover_{index}")
         if kind == "goal_wall":
             side = float(rng.uniform(0, 2 * math.pi))
-            gap = float(rng.uniform(0.04, 0.08))
-            centre = (float(goal[0] + gap * math.cos(side)), float(goal[1] + gap * math.sin(side)), float(goal[2]) + 0.01)
-            return ObstacleSpec("box", centre, rpy=(0.0, 0.0, side), half_extents=(0.002, 0.1 * scale, 0.05 * scale),
-                                name=f"goal_wall_{index}")
+            return _wall_beside(goal, side, float(rng.uniform(0.04, 0.08)), scale, f"goal_wall_{index}")
         if kind == "box":
             half = tuple(float(v) for v in rng.uniform(0.02, 0.05, 3))
             return ObstacleSpec("box", centre, rpy=(0.0, 0.0, float(rng.uniform(0, math.pi))), half_extents=half,
                                 name=f"box_{index}")  # type: ignore[arg-type]
         return ObstacleSpec("sphere", centre, radius=0.04 * scale, name=f"sphere_{index}")
+
+
+def _wall_beside(goal: np.ndarray, side: float, gap: float, scale: float, name: str) -> ObstacleSpec:
+    """An upright plate ``gap`` from the goal in direction ``side`` (rad), facing the goal."""
+    centre = (float(goal[0] + gap * math.cos(side)), float(goal[1] + gap * math.sin(side)), float(goal[2]) + 0.01)
+    return ObstacleSpec("box", centre, rpy=(0.0, 0.0, side), half_extents=(0.002, 0.1 * scale, 0.05 * scale), name=name)
