@@ -142,7 +142,8 @@ class RandomWorlds:
         centre = (float(rng.uniform(-0.2, 0.2)), float(rng.uniform(0.15, 0.35)), float(rng.uniform(1.0, 1.2)))
         boxes, compartments = shelf_boxes(centre, prefix="shelf_")
         cx, cy, cz = compartments[int(rng.integers(len(compartments)))]
-        depth_offset = float(rng.uniform(0.0, 0.25))  # inside the compartment or just behind it
+        # inside the compartment or up to 0.2 m behind its far face (exp4..exp7: 0.1 m behind)
+        depth_offset = float(rng.uniform(0.0, 0.35))
         goal = np.array([cx, cy + depth_offset, cz]) + rng.uniform(-0.1, 0.1, 3) * np.array([1.0, 0.0, 1.0])
         return boxes, goal
 
