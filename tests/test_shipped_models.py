@@ -38,6 +38,15 @@ def test_shipped_ur5_policy_reaches_exp1_at_the_true_goal_size():
     assert record.path_length < 0.6  # the straight line is 0.37 m; the paper's DRL path 0.45 m
 
 
+@pytest.mark.xfail(strict=True, reason="the shipped KR16 policy has not learnt the shelf yet (docs/training.md); "
+                   "strict, so this fails once it does and the mark must go")
+def test_shipped_kr16_policy_reaches_exp4_at_the_true_goal_size():
+    with Executor("exp4") as ex:
+        record = ex.run(make_planner("drl", "kr16"), seed=0)
+    assert record.outcome == "success" and not record.collision
+    assert record.path_length < 1.2  # the paper's DRL path 0.91 m
+
+
 def test_final_approach_steps_straight_only_near_the_goal_and_clear_of_obstacles():
     approach = FinalApproach(radius=0.05, clearance=0.05, ee_step=0.005, ray_range=0.4)
     obs = np.zeros(OBS_SIZE, dtype=np.float32)
