@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import json
 from pathlib import Path
 
@@ -17,23 +18,29 @@ from rayreach.policy import FinalApproach
 CASES = [("ur5", "exp1"), ("kr16", "exp4")]
 
 
+@functools.cache
+def _shipped_run(robot, scenario):
+    """The shipped policy's planner and its run of ``scenario`` (seed 0), once per module:
+    the policy is deterministic, so every test of the pair would replay the same episode."""
+    planner = make_planner("drl", robot)
+    with Executor(scenario) as ex:
+        return planner, ex.run(planner, seed=0)
+
+
 @pytest.mark.parametrize("robot,scenario", CASES)
 def test_shipped_policy_loads_with_metadata_and_runs_an_episode(robot, scenario):
     bundle = MODELS_DIR / f"{robot}.zip"
     meta = json.loads(Path(bundle.with_suffix(".json")).read_text())
     assert meta["robot"] == robot and meta["timesteps"] > 0 and "rayreach train" in meta["command"]
-    planner = make_planner("drl", robot)
+    planner, record = _shipped_run(robot, scenario)
     assert planner.policy.normalization is not None  # training's statistics travel with the policy
-    with Executor(scenario) as ex:
-        record = ex.run(planner, seed=0)
     assert record.outcome in {"success", "collision", "timeout", "out of bounds"}
     assert 0 < record.steps <= 1024 and record.config["timesteps"] == meta["timesteps"]
     assert np.isfinite(record.ee_path).all()
 
 
 def test_shipped_ur5_policy_reaches_exp1_at_the_true_goal_size():
-    with Executor("exp1") as ex:
-        record = ex.run(make_planner("drl", "ur5"), seed=0)
+    _planner, record = _shipped_run("ur5", "exp1")
     assert record.outcome == "success" and not record.collision
     assert record.path_length < 0.6  # the straight line is 0.37 m; the paper's DRL path 0.45 m
 
@@ -41,8 +48,7 @@ def test_shipped_ur5_policy_reaches_exp1_at_the_true_goal_size():
 @pytest.mark.xfail(strict=True, reason="the shipped KR16 policy has not learnt the shelf yet (docs/training.md); "
                    "strict, so this fails once it does and the mark must go")
 def test_shipped_kr16_policy_reaches_exp4_at_the_true_goal_size():
-    with Executor("exp4") as ex:
-        record = ex.run(make_planner("drl", "kr16"), seed=0)
+    _planner, record = _shipped_run("kr16", "exp4")
     assert record.outcome == "success" and not record.collision
     assert record.path_length < 1.2  # the paper's DRL path 0.91 m
 

@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from rayreach.sensors import RAY_RANGE
+from rayreach.sensors import N_RAYS, RAY_RANGE
 
 META_ENTRY = "rayreach/meta.json"
 NORM_ENTRY = "rayreach/normalization.npz"
@@ -145,9 +145,7 @@ class FinalApproach:
 
     def action(self, obs: np.ndarray) -> np.ndarray | None:
         """The straight step for this observation, or None to leave it to the policy."""
-        from rayreach.env import N_ROBOT_OBS
-
-        if obs[12] >= self.radius or float(np.min(obs[N_ROBOT_OBS:])) * self.ray_range < self.clearance:
+        if obs[12] >= self.radius or float(np.min(obs[-N_RAYS:])) * self.ray_range < self.clearance:
             return None
         action = np.zeros(6, dtype=np.float32)
         action[:3] = np.clip(obs[6:9] / self.ee_step, -1.0, 1.0)
