@@ -26,6 +26,8 @@ def _pick_scenario(args: argparse.Namespace, parser: argparse.ArgumentParser) ->
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from rayreach.demonstrations import CloneConfig  # numpy only
+
     parser = argparse.ArgumentParser(prog="rayreach", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
 
@@ -108,6 +110,13 @@ def build_parser() -> argparse.ArgumentParser:
     export.add_argument("--run", required=True, help="run directory or bundle .zip")
     export.add_argument("--to", required=True, help="target .zip, e.g. models/ur5.zip")
 
+    clone = sub.add_parser("clone-shelf", help="fit a run's checkpoint to scripted shelf demonstrations (KR16)")
+    clone.add_argument("--run", required=True, help="run directory holding checkpoint.zip")
+    clone.add_argument("--episodes", type=int, default=CloneConfig.episodes, help="shelf episodes per round")
+    clone.add_argument("--rounds", type=int, default=CloneConfig.rounds)
+    clone.add_argument("--anchor-episodes", type=int, default=CloneConfig.anchor_episodes,
+                       help="episodes in the other training worlds that keep their behaviour")
+
     demo = sub.add_parser("demo", help="a scripted episode on exp1, drawn to a PNG")
     demo.add_argument("--scenario", default="exp1")
     demo.add_argument("--out", default="demo", help="output directory")
@@ -140,6 +149,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             return 0
         if args.command == "rollout":
             return _rollout(args, _pick_scenario(args, parser))
+        if args.command == "clone-shelf":
+            return _clone_shelf(args)
     except KeyboardInterrupt as exc:
         print(f"rayreach {args.command}: {exc or 'interrupted'}", file=sys.stderr)
         return 130
@@ -329,6 +340,19 @@ def _rollout(args: argparse.Namespace, scenario: str) -> int:
     print(f"{scenario}: {summary.episodes} episodes ({mode}), success {summary.success_rate:.1%}, "
           f"collisions {summary.collision_rate:.1%}, mean path {summary.path_length_mean:.3f} m, "
           f"mean steps {summary.steps_mean:.0f}")
+    return 0
+
+
+def _clone_shelf(args: argparse.Namespace) -> int:
+    from rayreach.demonstrations import CloneConfig, clone_into_checkpoint
+
+    config = CloneConfig(episodes=args.episodes, rounds=args.rounds, anchor_episodes=args.anchor_episodes)
+    report = clone_into_checkpoint(args.run, config)
+    before, after = report["shelf_worlds"]["before"], report["shelf_worlds"]["after"]
+    print(f"shelf worlds: success {before['success']:.0%} -> {after['success']:.0%}, "
+          f"collisions {before['collision']:.0%} -> {after['collision']:.0%}; "
+          f"other worlds: success {report['other_worlds']['before']['success']:.0%} -> "
+          f"{report['other_worlds']['after']['success']:.0%} ({report['wall_time_s']:.0f} s)")
     return 0
 
 

@@ -70,8 +70,9 @@ def restore_normalization(vecnorm: Any, arrays: dict[str, np.ndarray]) -> None:
     vecnorm.ret_rms.count = float(arrays["ret_count"])
 
 
-def save_bundle(model: Any, path: str | Path, meta: dict[str, Any], vecnorm: Any | None) -> Path:
-    """Write model + metadata + normalisation atomically (a crash never leaves half a file)."""
+def save_bundle(model: Any, path: str | Path, meta: dict[str, Any], vecnorm: Any | dict[str, np.ndarray] | None) -> Path:
+    """Write model + metadata + normalisation atomically (a crash never leaves half a file).
+    ``vecnorm``: a VecNormalize, or the arrays ``read_bundle_meta`` returned for one."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".", suffix=".part.zip")
@@ -82,7 +83,7 @@ def save_bundle(model: Any, path: str | Path, meta: dict[str, Any], vecnorm: Any
             archive.writestr(META_ENTRY, json.dumps({"format": FORMAT, **meta}, indent=2, default=_json_default))
             if vecnorm is not None:
                 buffer = io.BytesIO()
-                np.savez(buffer, **normalization_arrays(vecnorm))
+                np.savez(buffer, **(vecnorm if isinstance(vecnorm, dict) else normalization_arrays(vecnorm)))
                 archive.writestr(NORM_ENTRY, buffer.getvalue())
         os.replace(tmp, path)
     finally:

@@ -26,6 +26,10 @@ goal; goal_slot: two parallel upright plates either side of the goal (as in exp2
 listed twice in a robot's ``training_kinds`` is drawn twice as often."""
 
 
+SHELF_DEPTH = 0.3
+"""Depth of a shelf along y, m (exp4..exp7)."""
+
+
 @dataclass(frozen=True)
 class RandomWorldConfig:
     n_obstacles: int = 3
@@ -45,7 +49,7 @@ def shelf_boxes(
     center: tuple[float, float, float],
     width: float = 1.0,
     height: float = 1.0,
-    depth: float = 0.3,
+    depth: float = SHELF_DEPTH,
     thickness: float = 0.06,
     prefix: str = "",
 ) -> tuple[list[ObstacleSpec], list[tuple[float, float, float]]]:
@@ -88,20 +92,22 @@ class RandomWorlds:
             raise ValueError(f"n_obstacles must be >= 0, got {n}")
         spec = self.kin.spec
         for _ in range(self.config.max_tries):
-            start = rng.uniform(self.low, self.high)
+            kinds = [str(k) for k in rng.choice(self.kinds, size=n)] if n and self.kinds else []
+            obstacles: list[ObstacleSpec] = []
+            start_low, start_high = self.low, self.high
+            goal = None
+            if "shelf" in kinds:  # at most one shelf; the goal goes into one of its compartments
+                others = [k for k in self.kinds if k != "shelf"]
+                kinds = [str(k) for k in rng.choice(others, size=n - 1)] if others else []
+                boxes, goal, (start_low, start_high) = self._shelf(rng)
+                obstacles += boxes
+            start = rng.uniform(start_low, start_high)
             ik = self.kin.ik(start, self.tool_rot, np.asarray(spec.home), self._ik)
             if not ik.converged:
                 continue
             q_start = ik.q
             start = self.kin.fk(q_start)[:3, 3]
-            obstacles: list[ObstacleSpec] = []
-            kinds = [str(k) for k in rng.choice(self.kinds, size=n)] if n and self.kinds else []
-            if "shelf" in kinds:  # at most one shelf; the goal goes into one of its compartments
-                others = [k for k in self.kinds if k != "shelf"]
-                kinds = [str(k) for k in rng.choice(others, size=n - 1)] if others else []
-                boxes, goal = self._shelf(rng, start)
-                obstacles += boxes
-            else:
+            if goal is None:
                 goal = rng.uniform(self.low, self.high)
             if np.linalg.norm(goal - start) < self.config.min_goal_distance or not self._inside(goal):
                 continue
@@ -138,14 +144,23 @@ class RandomWorlds:
     def _inside(self, point: np.ndarray) -> bool:
         return bool(np.all(point >= self.low) and np.all(point <= self.high))
 
-    def _shelf(self, rng: np.random.Generator, start: np.ndarray) -> tuple[list[ObstacleSpec], np.ndarray]:
+    def _shelf(
+        self, rng: np.random.Generator
+    ) -> tuple[list[ObstacleSpec], np.ndarray, tuple[np.ndarray, np.ndarray]]:
+        """The shelf's boxes, a goal in it, and the box the start is drawn from: in front of the
+        open face that looks at the robot (-y), at least 0.1 m off it, as in exp4..exp7. A start
+        anywhere in the workspace put the tool above or behind the shelf, where reaching in
+        teaches nothing about entering a compartment."""
         centre = (float(rng.uniform(-0.2, 0.2)), float(rng.uniform(0.15, 0.35)), float(rng.uniform(1.0, 1.2)))
         boxes, compartments = shelf_boxes(centre, prefix="shelf_")
         cx, cy, cz = compartments[int(rng.integers(len(compartments)))]
         # inside the compartment or up to 0.2 m behind its far face (exp4..exp7: 0.1 m behind)
         depth_offset = float(rng.uniform(0.0, 0.35))
         goal = np.array([cx, cy + depth_offset, cz]) + rng.uniform(-0.1, 0.1, 3) * np.array([1.0, 0.0, 1.0])
-        return boxes, goal
+        front = centre[1] - SHELF_DEPTH / 2 - 0.1
+        start_low = np.maximum(self.low, [centre[0] - 0.5, self.low[1], centre[2] - 0.5])
+        start_high = np.minimum(self.high, [centre[0] + 0.5, front, centre[2] + 0.5])
+        return boxes, goal, (start_low, start_high)
 
     def _goal_slot(self, rng: np.random.Generator, goal: np.ndarray, index: int) -> list[ObstacleSpec]:
         side = float(rng.uniform(0, math.pi))
