@@ -396,6 +396,12 @@ def test_random_worlds_kr16_count_a_shelf_as_one_obstacle():
             assert len([n for n in names if n.startswith("shelf_")]) in (0, 6)
             units = _obstacle_units(names)
             assert units == 3, f"seed {seed}: {units} obstacles (shelf counted once), asked for 3: {names}"
+            board = next((o for o in env.scenario.obstacles if o.name == "shelf_board_0"), None)
+            if board is not None:  # the tool starts before the open face, as in exp4..exp7
+                front = board.position[1] - board.half_extents[1]
+                tip = env.scene.tcp_pose()[0]
+                assert tip[1] <= front - 0.1 + 1e-3, f"seed {seed}: start {tip} not in front of {front}"
+                assert abs(tip[0] - board.position[0]) <= board.half_extents[0] + 1e-3
     finally:
         env.close()
 

@@ -45,8 +45,6 @@ def test_shipped_ur5_policy_reaches_exp1_at_the_true_goal_size():
     assert record.path_length < 0.6  # the straight line is 0.37 m; the paper's DRL path 0.45 m
 
 
-@pytest.mark.xfail(strict=True, reason="the shipped KR16 policy has not learnt the shelf yet (docs/training.md); "
-                   "strict, so this fails once it does and the mark must go")
 def test_shipped_kr16_policy_reaches_exp4_at_the_true_goal_size():
     _planner, record = _shipped_run("kr16", "exp4")
     assert record.outcome == "success" and not record.collision

@@ -116,6 +116,8 @@ def build_parser() -> argparse.ArgumentParser:
     clone.add_argument("--rounds", type=int, default=CloneConfig.rounds)
     clone.add_argument("--anchor-episodes", type=int, default=CloneConfig.anchor_episodes,
                        help="episodes in the other training worlds that keep their behaviour")
+    clone.add_argument("--eval-episodes", type=int, default=CloneConfig.eval_episodes,
+                       help="shelf episodes that measure the actor before and after")
 
     demo = sub.add_parser("demo", help="a scripted episode on exp1, drawn to a PNG")
     demo.add_argument("--scenario", default="exp1")
@@ -346,7 +348,8 @@ def _rollout(args: argparse.Namespace, scenario: str) -> int:
 def _clone_shelf(args: argparse.Namespace) -> int:
     from rayreach.demonstrations import CloneConfig, clone_into_checkpoint
 
-    config = CloneConfig(episodes=args.episodes, rounds=args.rounds, anchor_episodes=args.anchor_episodes)
+    config = CloneConfig(episodes=args.episodes, rounds=args.rounds, anchor_episodes=args.anchor_episodes,
+                         eval_episodes=args.eval_episodes)
     report = clone_into_checkpoint(args.run, config)
     before, after = report["shelf_worlds"]["before"], report["shelf_worlds"]["after"]
     print(f"shelf worlds: success {before['success']:.0%} -> {after['success']:.0%}, "
