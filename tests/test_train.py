@@ -49,11 +49,13 @@ def test_train_kill_resume_rollout(tmp_path):
     assert not (out / "model.zip").exists()
 
     assert meta["config"]["true_goal_share"] == 0.5
-    done = _run(*_train_args(out, 6144), "--resume", "--true-goal-share", "0.25")
+    done = _run(*_train_args(out, 6144), "--resume", "--true-goal-share", "0.25", "--obstacles", "2")
     assert done.returncode == 0, done.stderr[-2000:]
     final, _ = read_bundle_meta(out / "model.zip")
     assert final["kind"] == "model" and final["timesteps"] >= 6144
     assert final["config"]["true_goal_share"] == 0.25  # a resumed part may change the share
+    assert final["config"]["obstacles"]["minimum"] == final["config"]["obstacles"]["maximum"] == 2
+    assert final["state"]["obstacles"]["count"] == 2  # and hold the obstacle count
     assert final["state"]["episodes"] >= meta["state"]["episodes"]  # the curriculum went on
     with (out / "curve.csv").open() as handle:
         steps = [int(row["timesteps"]) for row in csv.DictReader(handle)]

@@ -89,7 +89,8 @@ def build_parser() -> argparse.ArgumentParser:
                        help="weight of the proximity reward term (0: the paper's reward alone)")
     train.add_argument("--target-kl", type=float, default=None, help="early-stop updates at this KL (0: never)")
     train.add_argument("--separate-features", action="store_true", help="actor and critic get their own extractor")
-    train.add_argument("--obstacles", type=int, default=None, help="fix the obstacle count (no obstacle curriculum)")
+    train.add_argument("--obstacles", type=int, default=None,
+                       help="fix the obstacle count (no obstacle curriculum; also holds a resumed run's count)")
     train.add_argument("--goal-size", type=float, default=None, help="fix the goal size, m (no goal curriculum)")
     train.add_argument("--true-goal-share", type=float, default=None,
                        help="share of episodes at the true goal size while the goal is enlarged (default 0.5; "
@@ -312,15 +313,14 @@ def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
         config = replace(config, target_kl=args.target_kl or None)
     if args.separate_features:
         config = replace(config, share_features=False)
+    overrides: dict = {}
     if args.obstacles is not None:
-        config = replace(config, obstacles=ObstacleParams(start=args.obstacles, minimum=args.obstacles,
-                                                          maximum=args.obstacles))
+        overrides["obstacles"] = ObstacleParams(start=args.obstacles, minimum=args.obstacles, maximum=args.obstacles)
     if args.goal_size is not None:
         config = replace(config, goal=GoalSizeParams(rho=args.goal_size, e_zeta=2**62))
-    overrides = {}
     if args.true_goal_share is not None:
         overrides["true_goal_share"] = args.true_goal_share
-        config = replace(config, **overrides)
+    config = replace(config, **overrides)
     command = "rayreach " + " ".join(sys.argv[1:] if argv is None else argv)
     path = train(config, args.out, resume=args.resume, command=command, resume_overrides=overrides)
     print(f"model: {path}")

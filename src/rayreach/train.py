@@ -372,7 +372,8 @@ def train(config: TrainConfig, out: str | Path, resume: bool = False, command: s
     """Train (or resume) into ``out``; returns the path of the final model bundle.
 
     A resumed run keeps its saved configuration except ``timesteps``, ``workers`` and the
-    fields named in ``resume_overrides`` (e.g. a new ``true_goal_share`` for a second part)."""
+    fields named in ``resume_overrides`` (e.g. a new ``true_goal_share`` for a second part, or
+    ``obstacles`` to hold the count, which restarts the obstacle curriculum)."""
     out = Path(out)
     checkpoint = out / CHECKPOINT
     from stable_baselines3 import PPO
@@ -388,6 +389,8 @@ def train(config: TrainConfig, out: str | Path, resume: bool = False, command: s
             raise CheckpointError(f"{checkpoint} trains robot '{saved.robot}', not '{config.robot}'")
         config = replace(saved, timesteps=config.timesteps, workers=config.workers, **(resume_overrides or {}))
         state = TrainState.from_dict(meta["state"])
+        if "obstacles" in (resume_overrides or {}):  # a new obstacle rule starts its own count
+            state.obstacles = ObstacleCurriculum(config.obstacles)
     else:
         if checkpoint.exists():
             raise CheckpointError(f"{checkpoint} exists: pass --resume to continue it, or choose another --out")
