@@ -14,16 +14,16 @@ from __future__ import annotations
 
 import json
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
 from tqdm import tqdm
 
-from rayreach.policy import CheckpointError, FinalApproach, Normalization, read_bundle_meta, save_bundle
+from rayreach.policy import CheckpointError, FinalApproach, Normalization, Policy, read_bundle_meta, save_bundle
+from rayreach.train import CHECKPOINT
 
-CHECKPOINT = "checkpoint.zip"
 REPORT = "clone.json"
 
 
@@ -110,7 +110,8 @@ def clone_into_checkpoint(run: str | Path, config: CloneConfig = CloneConfig(), 
     meta, norm = read_bundle_meta(checkpoint)
     if meta.get("kind") != "checkpoint":
         raise CheckpointError(f"{checkpoint} is a {meta.get('kind')} bundle, not a training checkpoint")
-    if norm is None or not bool(norm["norm_obs"]):
+    normalize = Normalization.from_arrays(norm)
+    if normalize is None:
         raise CheckpointError(f"{checkpoint} carries no observation normalisation; cloning needs the one PPO sees")
     robot = str(meta["robot"])
     spec = get_robot(robot)
@@ -119,21 +120,13 @@ def clone_into_checkpoint(run: str | Path, config: CloneConfig = CloneConfig(), 
     torch.manual_seed(config.seed)
     model = PPO.load(str(checkpoint), device="cpu")
     policy = model.policy
-    normalize = Normalization(norm["obs_mean"], norm["obs_var"], float(norm["clip_obs"]), float(norm["epsilon"]))
     expert = ShelfExpert(ee_step=spec.ee_step, rot_step=spec.rot_step)
+    # acting as the DRL planner does (with the final approach), and the actor alone
+    as_planner = Policy(model, normalize, meta, checkpoint, FinalApproach(ee_step=spec.ee_step))
+    alone = replace(as_planner, final_approach=None)
 
     def actor_mean(raw: np.ndarray) -> torch.Tensor:
         return policy.get_distribution(torch.as_tensor(normalize(raw))).distribution.mean
-
-    def act(obs: np.ndarray) -> np.ndarray:
-        with torch.no_grad():
-            return np.clip(actor_mean(obs[None])[0].numpy(), -1.0, 1.0)
-
-    final_approach = FinalApproach(ee_step=spec.ee_step)
-
-    def act_as_planner(obs: np.ndarray) -> np.ndarray:  # what the DRL planner does (rollout's default)
-        straight = final_approach.action(obs)
-        return act(obs) if straight is None else straight
 
     def expert_label(obs: np.ndarray, env) -> np.ndarray:
         return expert.action(obs, env.ee_rot[:, 2])
@@ -144,17 +137,17 @@ def clone_into_checkpoint(run: str | Path, config: CloneConfig = CloneConfig(), 
     anchor_env = _world_env(robot, n_obstacles, others, goal_size)  # judged as training judges them
     shelf_env = _world_env(robot, 1, ("shelf",), float(meta["config"]["goal"]["rho_min"]))  # the true task
     try:
-        anchor_obs, _, anchor_before = _play(anchor_env, act, lambda o, e: o, config.anchor_episodes,
+        anchor_obs, _, anchor_before = _play(anchor_env, alone.act, lambda o, e: o, config.anchor_episodes,
                                              config.seed + 10_000, "anchor", progress)
         with torch.no_grad():
             anchor_labels = [actor_mean(np.asarray(anchor_obs)).numpy()] if anchor_obs else []
-        _, _, shelf_before = _play(shelf_env, act_as_planner, None, config.eval_episodes, config.seed + 20_000, "before", progress)
+        _, _, shelf_before = _play(shelf_env, as_planner.act, None, config.eval_episodes, config.seed + 20_000, "before", progress)
         shelf_obs: list[np.ndarray] = []
         shelf_labels: list[np.ndarray] = []
         optimiser = torch.optim.Adam(policy.parameters(), lr=config.learning_rate)
         rounds = []
         for r in range(config.rounds):
-            follow = (lambda o: expert.action(o, shelf_env.ee_rot[:, 2])) if r == 0 else act
+            follow = (lambda o: expert_label(o, shelf_env)) if r == 0 else alone.act
             obs, labels, outcome = _play(shelf_env, follow, expert_label, config.episodes,
                                          config.seed + 1_000 * r, f"round {r + 1}", progress)
             shelf_obs += obs
@@ -164,8 +157,8 @@ def clone_into_checkpoint(run: str | Path, config: CloneConfig = CloneConfig(), 
             loss = _fit(policy, optimiser, x, y, config.epochs, config.batch_size)
             rounds.append({"round": r + 1, "followed": "expert" if r == 0 else "cloned actor",
                            "success_rate": outcome["success"], "samples": len(y), "loss": loss})
-        _, _, shelf_after = _play(shelf_env, act_as_planner, None, config.eval_episodes, config.seed + 20_000, "after", progress)
-        _, _, anchor_after = _play(anchor_env, act, None, config.anchor_episodes, config.seed + 10_000, "anchor after",
+        _, _, shelf_after = _play(shelf_env, as_planner.act, None, config.eval_episodes, config.seed + 20_000, "after", progress)
+        _, _, anchor_after = _play(anchor_env, alone.act, None, config.anchor_episodes, config.seed + 10_000, "anchor after",
                                    progress)
     finally:
         anchor_env.close()

@@ -43,6 +43,13 @@ class Normalization:
         out = (np.asarray(obs, dtype=np.float64) - self.mean) / np.sqrt(self.var + self.epsilon)
         return np.clip(out, -self.clip, self.clip).astype(np.float32)
 
+    @classmethod
+    def from_arrays(cls, arrays: dict[str, np.ndarray] | None) -> "Normalization | None":
+        """The frozen observation normalisation of a bundle's arrays; None if it has none."""
+        if arrays is None or not bool(arrays["norm_obs"]):
+            return None
+        return cls(arrays["obs_mean"], arrays["obs_var"], float(arrays["clip_obs"]), float(arrays["epsilon"]))
+
 
 def normalization_arrays(vecnorm: Any) -> dict[str, np.ndarray]:
     """Everything a VecNormalize needs to continue, as arrays."""
@@ -196,9 +203,7 @@ def load_policy(path: str | Path, device: str = "cpu", final_approach: FinalAppr
     obs_size = model.observation_space.shape
     if tuple(obs_size) != tuple(meta.get("obs_shape", obs_size)):
         raise CheckpointError(f"{path}: observation shape {obs_size} does not match its metadata")
-    normalization = None
-    if norm is not None and bool(norm["norm_obs"]):
-        normalization = Normalization(norm["obs_mean"], norm["obs_var"], float(norm["clip_obs"]), float(norm["epsilon"]))
+    normalization = Normalization.from_arrays(norm)
     if final_approach is not None:
         from rayreach.robots import get_robot
 
