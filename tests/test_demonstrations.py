@@ -1,5 +1,6 @@
-"""Shelf demonstrations: the scripted expert enters every compartment of exp4..exp7, and
-cloning it into a checkpoint keeps the run resumable."""
+"""Scripted demonstrations: the shelf expert enters every compartment of exp4..exp7, the slot
+expert reaches both goals of exp2, and cloning an expert into a checkpoint keeps the run
+resumable."""
 
 from __future__ import annotations
 
@@ -11,7 +12,7 @@ import numpy as np
 import pybullet as p
 import pytest
 
-from rayreach.demonstrations import ShelfExpert
+from rayreach.demonstrations import ShelfExpert, SlotExpert, horizontal_reach, top_of
 from rayreach.env import ReachEnv
 from rayreach.policy import read_bundle_meta
 
@@ -31,6 +32,13 @@ def test_expert_levels_and_centres_the_tool_before_advancing():
     assert action[1] == 1.0 and np.allclose(action[3:], 0.0)
 
 
+def _clearance(scene) -> float:
+    """Least distance from the robot to any obstacle, by PyBullet's closest points."""
+    points = [point[8] for body in scene._obstacle_ids
+              for point in p.getClosestPoints(scene.robot, body, 0.05, physicsClientId=scene.client)]
+    return min(points, default=np.inf)
+
+
 @pytest.mark.parametrize("name", ["exp4", "exp5", "exp6", "exp7"])
 def test_expert_reaches_each_compartment_goal_without_touching_the_shelf(name):
     """Checked against PyBullet's own closest points at every step, not the env's flag."""
@@ -38,17 +46,14 @@ def test_expert_reaches_each_compartment_goal_without_touching_the_shelf(name):
     expert = ShelfExpert()
     try:
         obs, info = env.reset(seed=0)
-        scene = env.scene
         done, clearance, advanced_tilted = False, np.inf, False
         while not done:
-            action = expert.action(obs, env.ee_rot[:, 2])
+            action = expert.label(obs, env)
             if action[1] > 0 and env.ee_rot[1, 2] < np.cos(0.03):
                 advanced_tilted = True
             obs, _, terminated, truncated, info = env.step(action)
             done = terminated or truncated
-            for body in scene._obstacle_ids:
-                for point in p.getClosestPoints(scene.robot, body, 0.05, physicsClientId=scene.client):
-                    clearance = min(clearance, point[8])
+            clearance = min(clearance, _clearance(env.scene))
         assert info["is_success"] and not info["collision"]
         assert info["distance"] < 0.01
         assert clearance > 0.0
@@ -58,7 +63,59 @@ def test_expert_reaches_each_compartment_goal_without_touching_the_shelf(name):
         env.close()
 
 
-def test_clone_shelf_keeps_the_step_count_and_adds_its_time(tmp_path):
+def test_slot_expert_climbs_while_far_crosses_level_and_descends_only_above_the_goal():
+    expert = SlotExpert()
+    obs = np.zeros(142, dtype=np.float32)
+    down = np.array([0.0, 0.0, -1.0])
+    obs[6:9] = (-0.3, 0.0, -0.05)  # far: closes in while it climbs
+    action = expert.action(obs, down, height=0.30, crossing=0.35, reach=0.17)
+    assert action[0] == -1.0 and action[2] == 1.0 and np.allclose(action[3:], 0.0)
+    obs[6:9] = (-0.15, 0.0, -0.05)  # within reach, below the crossing height: climbs only
+    action = expert.action(obs, down, height=0.30, crossing=0.35, reach=0.17)
+    assert action[0] == 0.0 and action[2] == 1.0
+    obs[6:9] = (-0.15, 0.0, -0.1)  # at the crossing height: level, towards the goal
+    action = expert.action(obs, down, height=0.35, crossing=0.35, reach=0.17)
+    assert action[0] == -1.0 and action[2] == 0.0
+    obs[6:9] = (0.001, 0.0, -0.1)  # above the goal: straight down
+    action = expert.action(obs, down, height=0.35, crossing=0.35, reach=0.17)
+    assert action[2] == -1.0 and abs(action[0]) < 0.5
+    tilted = np.array([np.sin(0.1), 0.0, -np.cos(0.1)])
+    assert expert.action(obs, tilted, height=0.35, crossing=0.35, reach=0.17)[4] > 0  # +y turns a +x lean down
+
+
+def test_obstacle_top_and_reach_agree_with_pybullet_bounding_boxes():
+    env = ReachEnv(robot="ur5", scenario="exp2")
+    try:
+        env.reset(seed=0)
+        scene = env.scene
+        goal = env.goals[0]
+        for spec, body in zip(env.scenario.obstacles, scene._obstacle_ids):
+            low, high = p.getAABB(body, physicsClientId=scene.client)
+            assert top_of(spec) == pytest.approx(high[2], abs=1e-6)
+            corners = np.array([[x, y] for x in (low[0], high[0]) for y in (low[1], high[1])])
+            assert horizontal_reach(spec, goal) == pytest.approx(np.linalg.norm(corners - goal[:2], axis=1).max(), abs=1e-6)
+    finally:
+        env.close()
+
+
+def test_slot_expert_reaches_both_goals_of_exp2_without_touching_a_plate():
+    env = ReachEnv(robot="ur5", scenario="exp2")
+    expert = SlotExpert()
+    try:
+        obs, info = env.reset(seed=0)
+        done, clearance = False, np.inf
+        while not done:
+            obs, _, terminated, truncated, info = env.step(expert.label(obs, env))
+            done = terminated or truncated
+            clearance = min(clearance, _clearance(env.scene))
+        assert info["is_success"] and not info["collision"] and info["goal_index"] == 1
+        assert clearance > 0.0
+        assert env.steps < 300
+    finally:
+        env.close()
+
+
+def test_clone_keeps_the_step_count_and_adds_its_time(tmp_path):
     rayreach = [sys.executable, "-m", "rayreach.cli"]
     out = tmp_path / "run"
     trained = subprocess.run([*rayreach, "train", "--robot", "kr16", "--timesteps", "1024", "--envs", "2",
@@ -66,7 +123,7 @@ def test_clone_shelf_keeps_the_step_count_and_adds_its_time(tmp_path):
                              capture_output=True, text=True, timeout=240)
     assert trained.returncode == 0, trained.stderr[-2000:]
     before, _ = read_bundle_meta(out / "checkpoint.zip")
-    cloned = subprocess.run([*rayreach, "clone-shelf", "--run", str(out), "--episodes", "2", "--rounds", "2",
+    cloned = subprocess.run([*rayreach, "clone", "--run", str(out), "--kind", "shelf", "--episodes", "2", "--rounds", "2",
                              "--anchor-episodes", "1", "--eval-episodes", "1"],
                             capture_output=True, text=True, timeout=240)
     assert cloned.returncode == 0, cloned.stderr[-2000:]
@@ -74,13 +131,16 @@ def test_clone_shelf_keeps_the_step_count_and_adds_its_time(tmp_path):
     assert after["kind"] == "checkpoint" and after["timesteps"] == before["timesteps"]
     assert after["state"]["wall_time"] > before["state"]["wall_time"]
     assert norm is not None and norm["obs_mean"].shape == (142,)
-    report = json.loads((out / "clone.json").read_text())
+    report = json.loads((out / "clone-shelf.json").read_text())
     assert [r["followed"] for r in report["rounds"]] == ["expert", "cloned actor"]
     assert report["rounds"][0]["success_rate"] == 1.0  # the expert itself
     resumed = subprocess.run([*rayreach, "train", "--robot", "kr16", "--timesteps", "2048", "--envs", "2",
                               "--workers", "1", "--out", str(out), "--checkpoint-every", "1024", "--resume"],
                              capture_output=True, text=True, timeout=240)
     assert resumed.returncode == 0, resumed.stderr[-2000:]
-    wrong = subprocess.run([*rayreach, "clone-shelf", "--run", str(out / "model.zip")], capture_output=True,
+    wrong = subprocess.run([*rayreach, "clone", "--run", str(out / "model.zip"), "--kind", "shelf"], capture_output=True,
                            text=True, timeout=60)
     assert wrong.returncode == 2 and "checkpoint" in wrong.stderr
+    no_slots = subprocess.run([*rayreach, "clone", "--run", str(out), "--kind", "goal_slot"], capture_output=True,
+                              text=True, timeout=60)
+    assert no_slots.returncode == 2 and "does not train on 'goal_slot'" in no_slots.stderr and "shelf" in no_slots.stderr

@@ -26,7 +26,7 @@ def _pick_scenario(args: argparse.Namespace, parser: argparse.ArgumentParser) ->
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from rayreach.demonstrations import CloneConfig  # numpy only
+    from rayreach.demonstrations import EXPERTS, CloneConfig  # numpy only
 
     parser = argparse.ArgumentParser(prog="rayreach", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
@@ -111,14 +111,18 @@ def build_parser() -> argparse.ArgumentParser:
     export.add_argument("--run", required=True, help="run directory or bundle .zip")
     export.add_argument("--to", required=True, help="target .zip, e.g. models/ur5.zip")
 
-    clone = sub.add_parser("clone-shelf", help="fit a run's checkpoint to scripted shelf demonstrations (KR16)")
+    clone = sub.add_parser("clone", help="fit a run's checkpoint to a scripted expert's demonstrations")
     clone.add_argument("--run", required=True, help="run directory holding checkpoint.zip")
-    clone.add_argument("--episodes", type=int, default=CloneConfig.episodes, help="shelf episodes per round")
+    clone.add_argument("--kind", required=True, choices=EXPERTS,
+                       help="the world kind whose expert to clone: shelf (KR16), goal_slot (UR5)")
+    clone.add_argument("--episodes", type=int, default=CloneConfig.episodes, help="expert-world episodes per round")
     clone.add_argument("--rounds", type=int, default=CloneConfig.rounds)
     clone.add_argument("--anchor-episodes", type=int, default=CloneConfig.anchor_episodes,
                        help="episodes in the other training worlds that keep their behaviour")
+    clone.add_argument("--anchor-tolerance", type=float, default=None,
+                       help="goal tolerance of those episodes, m (default: the run's curriculum goal size)")
     clone.add_argument("--eval-episodes", type=int, default=CloneConfig.eval_episodes,
-                       help="shelf episodes that measure the actor before and after")
+                       help="expert-world episodes that measure the actor before and after")
 
     demo = sub.add_parser("demo", help="a scripted episode on exp1, drawn to a PNG")
     demo.add_argument("--scenario", default="exp1")
@@ -152,8 +156,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             return 0
         if args.command == "rollout":
             return _rollout(args, _pick_scenario(args, parser))
-        if args.command == "clone-shelf":
-            return _clone_shelf(args)
+        if args.command == "clone":
+            return _clone(args)
     except KeyboardInterrupt as exc:
         print(f"rayreach {args.command}: {exc or 'interrupted'}", file=sys.stderr)
         return 130
@@ -345,14 +349,15 @@ def _rollout(args: argparse.Namespace, scenario: str) -> int:
     return 0
 
 
-def _clone_shelf(args: argparse.Namespace) -> int:
+def _clone(args: argparse.Namespace) -> int:
     from rayreach.demonstrations import CloneConfig, clone_into_checkpoint
 
     config = CloneConfig(episodes=args.episodes, rounds=args.rounds, anchor_episodes=args.anchor_episodes,
+                         anchor_tolerance=args.anchor_tolerance,
                          eval_episodes=args.eval_episodes)
-    report = clone_into_checkpoint(args.run, config)
-    before, after = report["shelf_worlds"]["before"], report["shelf_worlds"]["after"]
-    print(f"shelf worlds: success {before['success']:.0%} -> {after['success']:.0%}, "
+    report = clone_into_checkpoint(args.run, args.kind, config)
+    before, after = report["expert_worlds"]["before"], report["expert_worlds"]["after"]
+    print(f"{args.kind} worlds: success {before['success']:.0%} -> {after['success']:.0%}, "
           f"collisions {before['collision']:.0%} -> {after['collision']:.0%}; "
           f"other worlds: success {report['other_worlds']['before']['success']:.0%} -> "
           f"{report['other_worlds']['after']['success']:.0%} ({report['wall_time_s']:.0f} s)")

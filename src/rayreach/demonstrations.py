@@ -1,13 +1,13 @@
-"""Shelf demonstrations, cloned into a training checkpoint before PPO continues.
+"""Scripted demonstrations, cloned into a training checkpoint.
 
-PPO alone did not learn to enter the KR16's shelf: the tool starts 30 degrees below
-horizontal, so the wrist rides above it and strikes the board over a compartment's opening
-(docs/training.md). A scripted controller that levels the tool, lines it up with the goal and
-then pushes straight in reaches every random shelf goal; fitting the actor to its actions
-(behaviour cloning, with DAgger rounds that label the cloned policy's own states) gives PPO a
-start from which it can shorten and generalise the motion. Episodes in the robot's other
-training worlds, labelled with the actor's actions from before cloning, keep it from
-forgetting them.
+PPO alone learned two motions badly (docs/training.md). The KR16 did not enter its shelf: the
+tool starts 30 degrees below horizontal, so the wrist rides above it and strikes the board
+over a compartment's opening. The UR5 did not descend between two upright plates to a goal
+below their tops: with the curriculum's 0.1 m goal, hovering above the slot already counted as
+reaching it. A scripted controller per world kind (``EXPERTS``) solves its worlds; fitting the
+actor to its actions (behaviour cloning, with DAgger rounds that label the cloned policy's own
+states) teaches the motion. Episodes in the robot's other training worlds, labelled with the
+actor's actions from before cloning, keep it from forgetting them.
 """
 
 from __future__ import annotations
@@ -16,15 +16,28 @@ import json
 import time
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, Protocol
 
 import numpy as np
 from tqdm import tqdm
 
 from rayreach.policy import CheckpointError, FinalApproach, Normalization, Policy, read_bundle_meta, save_bundle
 from rayreach.train import CHECKPOINT
+from rayreach.transforms import rpy_to_matrix
 
-REPORT = "clone.json"
+
+
+def report_name(kind: str) -> str:
+    """The report ``clone_into_checkpoint`` writes into the run directory."""
+    return f"clone-{kind}.json"
+
+
+class Expert(Protocol):
+    def accepts(self, env: Any) -> bool:
+        """Whether the expert can solve the world ``env`` has just reset to."""
+
+    def label(self, obs: np.ndarray, env: Any) -> np.ndarray:
+        """The expert's action for ``obs`` in ``env`` (a ``ReachEnv``)."""
 
 
 @dataclass(frozen=True)
@@ -50,17 +63,105 @@ class ShelfExpert:
         lateral = offset - along * float(offset @ along)
         if np.max(np.abs(lateral)) > self.position_tolerance or np.linalg.norm(turn) > self.angle_tolerance:
             offset = lateral
-        action = np.concatenate([offset / self.ee_step, turn / self.rot_step])
-        return np.clip(action, -1.0, 1.0).astype(np.float32)
+        return _action(offset, turn, self.ee_step, self.rot_step)
+
+    def accepts(self, env: Any) -> bool:
+        return True
+
+    def label(self, obs: np.ndarray, env: Any) -> np.ndarray:
+        return self.action(obs, env.ee_rot[:, 2])
+
+
+@dataclass(frozen=True)
+class SlotExpert:
+    """Keeps the tool pointing down, comes over the obstacles around the goal at ``clearance``
+    above the highest, then descends straight onto the goal: the way into a slot between two
+    upright plates (exp2). Far from the obstacles it climbs while it closes in, so the path is
+    a diagonal, not a climb-then-cross L."""
+
+    clearance: float = 0.04
+    """Height of the tool tip over the highest obstacle while crossing, m."""
+    margin: float = 0.03
+    """Horizontal distance, m, outside the obstacles' farthest point from the goal where the
+    tool must already be at crossing height."""
+    ceiling_margin: float = 0.01
+    """The crossing height must stay this far below the workspace's top, m."""
+    position_tolerance: float = 0.003
+    """Horizontal offset, m, below which the tool may descend."""
+    ee_step: float = 0.005
+    rot_step: float = 0.005
+
+    def action(self, obs: np.ndarray, tool_axis: np.ndarray, height: float, crossing: float,
+               reach: float) -> np.ndarray:
+        """``height``: the tool tip's z; ``crossing``: the z to cross at; ``reach``: the
+        horizontal radius around the goal within which the tool may only move at ``crossing``
+        (see ``crossing_height`` and ``reach``)."""
+        offset = np.asarray(obs[6:9], dtype=float)
+        turn = np.cross(tool_axis, (0.0, 0.0, -1.0))
+        across = float(np.linalg.norm(offset[:2]))
+        if across > self.position_tolerance:
+            climb = max(crossing - height, 0.0)
+            level = climb < 0.5 * self.ee_step
+            horizontal = offset[:2] if level or across - self.ee_step > reach else np.zeros(2)
+            offset = np.array([horizontal[0], horizontal[1], climb])
+        return _action(offset, turn, self.ee_step, self.rot_step)
+
+    def crossing_height(self, env: Any) -> float:
+        return max((top_of(o) for o in env.scenario.obstacles), default=-np.inf) + self.clearance
+
+    def reach(self, env: Any) -> float:
+        goal = env.goals[env.goal_index]
+        return max((horizontal_reach(o, goal) for o in env.scenario.obstacles), default=0.0) + self.margin
+
+    def accepts(self, env: Any) -> bool:
+        return self.crossing_height(env) <= env.scenario.workspace_high[2] - self.ceiling_margin
+
+    def label(self, obs: np.ndarray, env: Any) -> np.ndarray:
+        height = float(env.ee_pos[2])
+        return self.action(obs, env.ee_rot[:, 2], height, self.crossing_height(env), self.reach(env))
+
+
+def _corners(obstacle: Any) -> np.ndarray:
+    """The eight corners of a box (world frame, at its start position)."""
+    signs = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], dtype=float)
+    offsets = signs * np.asarray(obstacle.half_extents)
+    return np.asarray(obstacle.position) + offsets @ rpy_to_matrix(obstacle.rpy).T
+
+
+def top_of(obstacle: Any) -> float:
+    """Highest z of a box or sphere at its start position."""
+    if obstacle.shape == "sphere":
+        return float(obstacle.position[2]) + float(obstacle.radius)
+    return float(_corners(obstacle)[:, 2].max())
+
+
+def horizontal_reach(obstacle: Any, point: np.ndarray) -> float:
+    """Farthest horizontal distance from ``point`` to a box or sphere at its start position."""
+    if obstacle.shape == "sphere":
+        return float(np.linalg.norm(np.asarray(obstacle.position[:2]) - point[:2])) + float(obstacle.radius)
+    return float(np.linalg.norm(_corners(obstacle)[:, :2] - point[:2], axis=1).max())
+
+
+def _action(offset: np.ndarray, turn: np.ndarray, ee_step: float, rot_step: float) -> np.ndarray:
+    action = np.concatenate([offset / ee_step, turn / rot_step])
+    return np.clip(action, -1.0, 1.0).astype(np.float32)
+
+
+EXPERTS: dict[str, type[ShelfExpert] | type[SlotExpert]] = {"shelf": ShelfExpert, "goal_slot": SlotExpert}
+"""The world kinds (``random_world.KINDS``) that have a scripted expert."""
 
 
 @dataclass(frozen=True)
 class CloneConfig:
     episodes: int = 150
-    """Shelf episodes per round."""
+    """Episodes per round in the expert's worlds."""
     rounds: int = 3
     """Round 1 follows the expert; later rounds follow the cloned actor, labelled by the expert."""
     anchor_episodes: int = 60
+    anchor_tolerance: float | None = None
+    """Goal tolerance of the anchor episodes, m; None: the run's current curriculum goal size.
+    At the true 0.01 m the last decimetre before the goal is in the anchor data too; without
+    it, a clone whose expert descends only between walls stopped above free goals (UR5 exp2)."""
     """Episodes in the robot's other training worlds, labelled by the actor before cloning."""
     eval_episodes: int = 60
     epochs: int = 20
@@ -78,11 +179,15 @@ def _world_env(robot: str, n_obstacles: int, kinds: tuple[str, ...], goal_tolera
 
 
 def _play(env, act: Callable[[np.ndarray], np.ndarray], label: Callable[[np.ndarray, Any], np.ndarray] | None,
-          episodes: int, seed: int, desc: str, progress: bool) -> tuple[list[np.ndarray], list[np.ndarray], dict[str, float]]:
-    """Play ``episodes``, acting with ``act``; record raw observations and ``label(obs, env)``."""
+          episodes: int, seed: int, desc: str, progress: bool, accepts: Callable[[Any], bool] = lambda env: True,
+          ) -> tuple[list[np.ndarray], list[np.ndarray], dict[str, float]]:
+    """Play ``episodes`` in worlds that ``accepts``, acting with ``act``; record raw
+    observations and ``label(obs, env)``."""
     observations, labels, outcomes = [], [], {"success": 0, "collision": 0}
     for episode in tqdm(range(episodes), desc=desc, disable=not progress, leave=False):
         obs, _ = env.reset(seed=seed + episode)
+        while not accepts(env):
+            obs, _ = env.reset()
         done = False
         while not done:
             if label is not None:
@@ -95,10 +200,11 @@ def _play(env, act: Callable[[np.ndarray], np.ndarray], label: Callable[[np.ndar
     return observations, labels, {k: v / max(episodes, 1) for k, v in outcomes.items()}
 
 
-def clone_into_checkpoint(run: str | Path, config: CloneConfig = CloneConfig(), progress: bool = True) -> dict[str, Any]:
-    """Fit the actor of ``run``'s checkpoint to shelf demonstrations and save it in place
-    (same step count; the time spent is added to the run's training wall time). Returns the
-    report, also written to ``run/clone.json``."""
+def clone_into_checkpoint(run: str | Path, kind: str, config: CloneConfig = CloneConfig(),
+                          progress: bool = True) -> dict[str, Any]:
+    """Fit the actor of ``run``'s checkpoint to the expert of world ``kind`` (see ``EXPERTS``)
+    and save it in place (same step count; the time spent is added to the run's training wall
+    time). Returns the report, also written to ``run/clone-KIND.json``."""
     import torch
     from stable_baselines3 import PPO
 
@@ -115,12 +221,15 @@ def clone_into_checkpoint(run: str | Path, config: CloneConfig = CloneConfig(), 
         raise CheckpointError(f"{checkpoint} carries no observation normalisation; cloning needs the one PPO sees")
     robot = str(meta["robot"])
     spec = get_robot(robot)
-    if "shelf" not in spec.training_kinds:
-        raise ValueError(f"robot '{robot}' does not train on shelves; shelf demonstrations are for a robot that does")
+    if kind not in EXPERTS:
+        raise ValueError(f"no expert for world kind '{kind}'; known: {', '.join(EXPERTS)}")
+    if kind not in spec.training_kinds:
+        kinds = ", ".join(dict.fromkeys(spec.training_kinds))
+        raise ValueError(f"robot '{robot}' does not train on '{kind}' worlds; its kinds: {kinds}")
     torch.manual_seed(config.seed)
     model = PPO.load(str(checkpoint), device="cpu")
     policy = model.policy
-    expert = ShelfExpert(ee_step=spec.ee_step, rot_step=spec.rot_step)
+    expert = EXPERTS[kind](ee_step=spec.ee_step, rot_step=spec.rot_step)
     # acting as the DRL planner does (with the final approach), and the actor alone
     as_planner = Policy(model, normalize, meta, checkpoint, FinalApproach(ee_step=spec.ee_step))
     alone = replace(as_planner, final_approach=None)
@@ -128,41 +237,41 @@ def clone_into_checkpoint(run: str | Path, config: CloneConfig = CloneConfig(), 
     def actor_mean(raw: np.ndarray) -> torch.Tensor:
         return policy.get_distribution(torch.as_tensor(normalize(raw))).distribution.mean
 
-    def expert_label(obs: np.ndarray, env) -> np.ndarray:
-        return expert.action(obs, env.ee_rot[:, 2])
-
     n_obstacles = int(meta["state"]["obstacles"]["count"])
     goal_size = float(meta["state"]["goal"]["size"])
-    others = tuple(k for k in spec.training_kinds if k != "shelf")
-    anchor_env = _world_env(robot, n_obstacles, others, goal_size)  # judged as training judges them
-    shelf_env = _world_env(robot, 1, ("shelf",), float(meta["config"]["goal"]["rho_min"]))  # the true task
+    others = tuple(k for k in spec.training_kinds if k != kind)
+    anchor_tolerance = goal_size if config.anchor_tolerance is None else config.anchor_tolerance
+    anchor_env = _world_env(robot, n_obstacles, others, anchor_tolerance)
+    expert_env = _world_env(robot, 1, (kind,), float(meta["config"]["goal"]["rho_min"]))  # the true task
     try:
-        anchor_obs, _, anchor_before = _play(anchor_env, alone.act, lambda o, e: o, config.anchor_episodes,
+        anchor_obs, _, anchor_before = _play(anchor_env, as_planner.act, lambda o, e: o, config.anchor_episodes,
                                              config.seed + 10_000, "anchor", progress)
         with torch.no_grad():
             anchor_labels = [actor_mean(np.asarray(anchor_obs)).numpy()] if anchor_obs else []
-        _, _, shelf_before = _play(shelf_env, as_planner.act, None, config.eval_episodes, config.seed + 20_000, "before", progress)
-        shelf_obs: list[np.ndarray] = []
-        shelf_labels: list[np.ndarray] = []
+        expert_before = _play(expert_env, as_planner.act, None, config.eval_episodes, config.seed + 20_000, "before",
+                              progress, expert.accepts)[2]
+        expert_obs: list[np.ndarray] = []
+        expert_labels: list[np.ndarray] = []
         optimiser = torch.optim.Adam(policy.parameters(), lr=config.learning_rate)
         rounds = []
         for r in range(config.rounds):
-            follow = (lambda o: expert_label(o, shelf_env)) if r == 0 else alone.act
-            obs, labels, outcome = _play(shelf_env, follow, expert_label, config.episodes,
-                                         config.seed + 1_000 * r, f"round {r + 1}", progress)
-            shelf_obs += obs
-            shelf_labels += labels
-            x = torch.as_tensor(normalize(np.asarray(shelf_obs + anchor_obs)))
-            y = torch.as_tensor(np.concatenate([np.asarray(shelf_labels)] + anchor_labels).astype(np.float32))
+            follow = (lambda o: expert.label(o, expert_env)) if r == 0 else alone.act
+            obs, labels, outcome = _play(expert_env, follow, expert.label, config.episodes,
+                                         config.seed + 1_000 * r, f"round {r + 1}", progress, expert.accepts)
+            expert_obs += obs
+            expert_labels += labels
+            x = torch.as_tensor(normalize(np.asarray(expert_obs + anchor_obs)))
+            y = torch.as_tensor(np.concatenate([np.asarray(expert_labels)] + anchor_labels).astype(np.float32))
             loss = _fit(policy, optimiser, x, y, config.epochs, config.batch_size)
             rounds.append({"round": r + 1, "followed": "expert" if r == 0 else "cloned actor",
                            "success_rate": outcome["success"], "samples": len(y), "loss": loss})
-        _, _, shelf_after = _play(shelf_env, as_planner.act, None, config.eval_episodes, config.seed + 20_000, "after", progress)
-        _, _, anchor_after = _play(anchor_env, alone.act, None, config.anchor_episodes, config.seed + 10_000, "anchor after",
-                                   progress)
+        expert_after = _play(expert_env, as_planner.act, None, config.eval_episodes, config.seed + 20_000, "after",
+                             progress, expert.accepts)[2]
+        _, _, anchor_after = _play(anchor_env, as_planner.act, None, config.anchor_episodes, config.seed + 10_000,
+                                   "anchor after", progress)
     finally:
         anchor_env.close()
-        shelf_env.close()
+        expert_env.close()
     elapsed = time.perf_counter() - started
     meta["state"]["wall_time"] = float(meta["state"]["wall_time"]) + elapsed
     meta["wall_time_s"] = round(meta["state"]["wall_time"], 1)
@@ -171,11 +280,13 @@ def clone_into_checkpoint(run: str | Path, config: CloneConfig = CloneConfig(), 
         "timesteps": int(meta["timesteps"]),
         "wall_time_s": round(elapsed, 1),
         "config": asdict(config),
-        "shelf_worlds": {"before": shelf_before, "after": shelf_after},
-        "other_worlds": {"before": anchor_before, "after": anchor_after, "obstacles": n_obstacles},
+        "kind": kind,
+        "expert_worlds": {"before": expert_before, "after": expert_after},
+        "other_worlds": {"before": anchor_before, "after": anchor_after, "obstacles": n_obstacles,
+                         "goal_tolerance": anchor_tolerance},
         "rounds": rounds,
     }
-    (run / REPORT).write_text(json.dumps(report, indent=2) + "\n")
+    (run / report_name(kind)).write_text(json.dumps(report, indent=2) + "\n")
     return report
 
 
