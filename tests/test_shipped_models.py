@@ -45,6 +45,22 @@ def test_shipped_ur5_policy_reaches_exp1_at_the_true_goal_size():
     assert record.path_length < 0.6  # the straight line is 0.37 m; the paper's DRL path 0.45 m
 
 
+def test_shipped_ur5_policy_reaches_both_goals_of_exp2():
+    """exp2's first goal lies between two plates, below their tops (slot demonstrations)."""
+    planner = make_planner("drl", "ur5")
+    with Executor("exp2") as ex:
+        record = ex.run(planner, seed=0)
+    assert record.outcome == "success" and not record.collision
+    assert record.path_length < 0.85  # the paper's DRL path
+
+
+@pytest.mark.parametrize("robot,kind", [("ur5", "goal_slot"), ("kr16", "shelf")])
+def test_shipped_json_names_the_demonstrations_cloned_into_the_policy(robot, kind):
+    meta = json.loads((MODELS_DIR / f"{robot}.json").read_text())
+    assert [d["kind"] for d in meta["demonstrations"]] == [kind]
+    assert meta["demonstrations"][0]["timesteps"] == meta["timesteps"]
+
+
 def test_shipped_kr16_policy_reaches_exp4_at_the_true_goal_size():
     _planner, record = _shipped_run("kr16", "exp4")
     assert record.outcome == "success" and not record.collision

@@ -235,6 +235,8 @@ def export_bundle(source: str | Path, target: str | Path) -> tuple[Path, Path]:
     info["curriculum"] = {"goal_size": meta["state"]["goal"]["size"], "obstacles": meta["state"]["obstacles"]["count"],
                           "episodes": meta["state"]["episodes"]}
     info["config"] = meta["config"]
+    # demonstrations cloned into the checkpoint (rayreach.demonstrations) leave their reports beside it
+    info["demonstrations"] = [json.loads(r.read_text()) for r in sorted(source.parent.glob("clone-*.json"))]
     json_path = target.with_suffix(".json")
     json_path.write_text(json.dumps(info, indent=2, default=_json_default) + "\n")
     return target, json_path
