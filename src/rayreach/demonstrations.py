@@ -51,25 +51,33 @@ class ShelfExpert:
     """Lateral offset, m, below which the tool may advance."""
     angle_tolerance: float = 0.02
     """Tool-axis misalignment, rad, below which the tool may advance."""
+    standoff: float = 0.05
+    """Until levelled and centred, the tool tip may advance up to this far in front of the
+    shelf's open face, m: closing in while it turns shortens the path."""
     ee_step: float = 0.005
     rot_step: float = 0.005
 
-    def action(self, obs: np.ndarray, tool_axis: np.ndarray) -> np.ndarray:
+    def action(self, obs: np.ndarray, tool_axis: np.ndarray, approach: float = 0.0) -> np.ndarray:
         """``obs`` as ``ReachEnv`` gives it (goal offset at 6:9); ``tool_axis``: the tool's
-        pointing direction (its z axis) in the world frame."""
+        pointing direction (its z axis) in the world frame; ``approach``: how far, m, the tip
+        may advance before it is levelled and centred (see ``label``)."""
         along = np.asarray(self.direction, dtype=float)
         offset = np.asarray(obs[6:9], dtype=float)
         turn = np.cross(tool_axis, along)  # rotation vector that turns the tool onto ``along``
-        lateral = offset - along * float(offset @ along)
+        ahead = float(offset @ along)
+        lateral = offset - along * ahead
         if np.max(np.abs(lateral)) > self.position_tolerance or np.linalg.norm(turn) > self.angle_tolerance:
-            offset = lateral
+            offset = lateral + along * min(max(approach, 0.0), max(ahead, 0.0))
         return _action(offset, turn, self.ee_step, self.rot_step)
 
     def accepts(self, env: Any) -> bool:
         return True
 
     def label(self, obs: np.ndarray, env: Any) -> np.ndarray:
-        return self.action(obs, env.ee_rot[:, 2])
+        along = np.asarray(self.direction, dtype=float)
+        front = min(float((_corners(o) @ along).min()) for o in env.scenario.obstacles)
+        approach = front - self.standoff - float(env.ee_pos @ along)
+        return self.action(obs, env.ee_rot[:, 2], approach)
 
 
 @dataclass(frozen=True)
