@@ -47,9 +47,7 @@ def test_shipped_ur5_policy_reaches_exp1_at_the_true_goal_size():
 
 def test_shipped_ur5_policy_reaches_both_goals_of_exp2():
     """exp2's first goal lies between two plates, below their tops (slot demonstrations)."""
-    planner = make_planner("drl", "ur5")
-    with Executor("exp2") as ex:
-        record = ex.run(planner, seed=0)
+    _planner, record = _shipped_run("ur5", "exp2")
     assert record.outcome == "success" and not record.collision
     assert record.path_length < 0.85  # the paper's DRL path
 

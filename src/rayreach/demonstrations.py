@@ -26,7 +26,6 @@ from rayreach.train import CHECKPOINT
 from rayreach.transforms import rpy_to_matrix
 
 
-
 def report_name(kind: str) -> str:
     """The report ``clone_into_checkpoint`` writes into the run directory."""
     return f"clone-{kind}.json"
@@ -155,7 +154,7 @@ def _action(offset: np.ndarray, turn: np.ndarray, ee_step: float, rot_step: floa
     return np.clip(action, -1.0, 1.0).astype(np.float32)
 
 
-EXPERTS: dict[str, type[ShelfExpert] | type[SlotExpert]] = {"shelf": ShelfExpert, "goal_slot": SlotExpert}
+EXPERTS: dict[str, Callable[..., Expert]] = {"shelf": ShelfExpert, "goal_slot": SlotExpert}
 """The world kinds (``random_world.KINDS``) that have a scripted expert."""
 
 
@@ -166,11 +165,11 @@ class CloneConfig:
     rounds: int = 3
     """Round 1 follows the expert; later rounds follow the cloned actor, labelled by the expert."""
     anchor_episodes: int = 60
+    """Episodes in the robot's other training worlds, labelled by the actor before cloning."""
     anchor_tolerance: float | None = None
     """Goal tolerance of the anchor episodes, m; None: the run's current curriculum goal size.
     At the true 0.01 m the last decimetre before the goal is in the anchor data too; without
     it, a clone whose expert descends only between walls stopped above free goals (UR5 exp2)."""
-    """Episodes in the robot's other training worlds, labelled by the actor before cloning."""
     eval_episodes: int = 60
     epochs: int = 20
     batch_size: int = 256
@@ -237,7 +236,7 @@ def clone_into_checkpoint(run: str | Path, kind: str, config: CloneConfig = Clon
     torch.manual_seed(config.seed)
     model = PPO.load(str(checkpoint), device="cpu")
     policy = model.policy
-    expert = EXPERTS[kind](ee_step=spec.ee_step, rot_step=spec.rot_step)
+    expert: Expert = EXPERTS[kind](ee_step=spec.ee_step, rot_step=spec.rot_step)
     # acting as the DRL planner does (with the final approach), and the actor alone
     as_planner = Policy(model, normalize, meta, checkpoint, FinalApproach(ee_step=spec.ee_step))
     alone = replace(as_planner, final_approach=None)
