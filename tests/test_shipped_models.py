@@ -65,19 +65,25 @@ def test_shipped_kr16_policy_reaches_exp4_at_the_true_goal_size():
     assert record.path_length < 1.2  # the paper's DRL path 0.91 m
 
 
-def test_final_approach_steps_straight_only_near_the_goal_and_clear_of_obstacles():
-    approach = FinalApproach(radius=0.05, clearance=0.05, ee_step=0.005, ray_range=0.4)
+def test_final_approach_steps_straight_only_near_the_goal_and_with_the_way_clear():
+    approach = FinalApproach(radius=0.1, clearance=0.05, margin=0.02, ee_step=0.005, ray_range=0.4)
     obs = np.zeros(OBS_SIZE, dtype=np.float32)
     obs[N_ROBOT_OBS:] = 1.0  # nothing within ray range
     obs[6:9] = (0.03, -0.002, 0.0)
     obs[12] = np.linalg.norm(obs[6:9])
     np.testing.assert_allclose(approach.action(obs), [1.0, -0.4, 0.0, 0.0, 0.0, 0.0], atol=1e-6)
     far = obs.copy()
-    far[6:9], far[12] = (0.06, 0.0, 0.0), 0.06
+    far[6:9], far[12] = (0.11, 0.0, 0.0), 0.11
     assert approach.action(far) is None
     crowded = obs.copy()
-    crowded[N_ROBOT_OBS + 40] = 0.1  # something 4 cm from a ray origin
+    crowded[N_ROBOT_OBS + 40] = 0.1  # something 4 cm from a ray origin: within the 5 cm clearance
     assert approach.action(crowded) is None
+    farther = obs.copy()
+    farther[6:9], farther[12] = (0.08, 0.0, 0.0), 0.08
+    farther[N_ROBOT_OBS + 40] = 0.2  # 8 cm free: beyond the clearance, short of the goal + 2 cm
+    assert approach.action(farther) is None
+    farther[N_ROBOT_OBS + 40] = 0.26  # 10.4 cm free
+    np.testing.assert_allclose(approach.action(farther), [1.0, 0, 0, 0, 0, 0], atol=1e-6)
 
 
 def test_a_drl_model_for_the_other_robot_is_refused():

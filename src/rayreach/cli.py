@@ -27,6 +27,7 @@ def _pick_scenario(args: argparse.Namespace, parser: argparse.ArgumentParser) ->
 
 def build_parser() -> argparse.ArgumentParser:
     from rayreach.demonstrations import EXPERTS, CloneConfig  # numpy only
+    from rayreach.safety import ACTING_SAFETY  # numpy only
 
     parser = argparse.ArgumentParser(prog="rayreach", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
@@ -104,7 +105,12 @@ def build_parser() -> argparse.ArgumentParser:
     roll.add_argument("--tolerance", type=float, default=0.01, help="goal tolerance, m (paper: 0.01)")
     roll.add_argument("--obstacles", type=int, default=None, help="obstacles per random world")
     roll.add_argument("--no-final-approach", action="store_true",
-                      help="the policy alone, without the straight final approach inside 5 cm")
+                      help="without the straight final approach inside 10 cm of the goal")
+    roll.add_argument("--workspace-guard", type=float, default=ACTING_SAFETY.workspace_guard,
+                      help="hold the tool this far inside the workspace, m (0: off; rayreach.safety)")
+    roll.add_argument("--ray-shield", type=float, default=ACTING_SAFETY.ray_shield,
+                      help="no motion towards what a ray sees nearer than this, m (0: off; rayreach.safety)")
+    roll.add_argument("--seed", type=int, default=None, help="seed of the first random world (default 1000000)")
     roll.add_argument("--json", action="store_true", help="print one JSON line")
 
     export = sub.add_parser("export", help="copy a run's model (or latest checkpoint) to a shipped file + JSON")
@@ -334,15 +340,19 @@ def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
 def _rollout(args: argparse.Namespace, scenario: str) -> int:
     from rayreach.policy import FinalApproach
     from rayreach.rollout import rollout
+    from rayreach.safety import SafetyLayer
 
     summary = rollout(args.model, scenario, episodes=args.episodes, deterministic=not args.stochastic,
                       goal_tolerance=args.tolerance, n_obstacles=args.obstacles, progress=not args.json,
-                      final_approach=None if args.no_final_approach else FinalApproach())
+                      final_approach=None if args.no_final_approach else FinalApproach(),
+                      safety=SafetyLayer(args.workspace_guard, args.ray_shield),
+                      **({} if args.seed is None else {"seed": args.seed}))
     if args.json:
         print(json.dumps({"scenario": scenario, **summary.to_dict()}))
         return 0
-    mode = ("deterministic" if summary.deterministic else "stochastic") + (
-        ", final approach" if summary.final_approach else ", policy alone")
+    helpers = [name for name, on in (("final approach", summary.final_approach),
+                                     ("safety layer", any(summary.safety.values()))) if on]
+    mode = ("deterministic" if summary.deterministic else "stochastic") + ", " + (" + ".join(helpers) or "policy alone")
     print(f"{scenario}: {summary.episodes} episodes ({mode}), success {summary.success_rate:.1%}, "
           f"collisions {summary.collision_rate:.1%}, mean path {summary.path_length_mean:.3f} m, "
           f"mean steps {summary.steps_mean:.0f}")

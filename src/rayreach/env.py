@@ -52,6 +52,7 @@ import numpy as np
 from rayreach import rewards as R
 from rayreach.kinematics import IKParams, Kinematics
 from rayreach.robots import RobotSpec, get_robot
+from rayreach.safety import SafetyLayer
 from rayreach.scenarios import RANDOM, Scenario, ScenarioError, get_scenario
 from rayreach.scenarios.feasibility import solve_start, validate
 from rayreach.scenarios.random_world import RandomWorldConfig, RandomWorlds
@@ -84,6 +85,9 @@ class EnvConfig:
     ik: IKParams = IKParams(tolerance=1e-4, max_iterations=10)
     """IK per step: 0.1 mm is ample for a 5 mm step, which one iteration nearly always reaches
     (the damping shrinks for small errors); an unconverged step still moves (``info["ik_converged"]``)."""
+    safety: SafetyLayer = SafetyLayer()
+    """Not in the paper: what the controller does to an action before the arm moves; off in
+    training, ``rayreach.safety.ACTING_SAFETY`` in the executor and ``rollout``."""
     rewards: R.RewardWeights = R.RewardWeights()
     random_world: RandomWorldConfig = field(default_factory=RandomWorldConfig)
 
@@ -230,6 +234,11 @@ class ReachEnv(gym.Env):
             raise ValueError(f"action contains NaN or infinity: {a.tolist()}; the scene is unchanged")
         delta = np.clip(a, -1.0, 1.0) * self._step_scale
         cfg = self.config
+        if cfg.safety.active:
+            scenario = self.scenario
+            delta = cfg.safety.filter(delta, self.ee_pos, np.asarray(scenario.workspace_low),  # type: ignore[union-attr]
+                                      np.asarray(scenario.workspace_high),  # type: ignore[union-attr]
+                                      self._ray_fractions * cfg.ray_range, self._ray_directions)
 
         target_pos = self.ee_pos + delta[:3]
         target_rot = rotvec_to_matrix(delta[3:]) @ self.ee_rot
@@ -294,8 +303,11 @@ class ReachEnv(gym.Env):
         return self._observation(distance, rays), float(sum(terms.values())), terminated, truncated, info
 
     def _cast_rays(self) -> np.ndarray:
-        origins, directions = self.rays.world_rays(self.frames)
-        return self.caster.cast(origins, directions, self.config.ray_range)
+        """Hit fractions of the rays in the current state (kept, with the directions, for
+        the safety layer)."""
+        origins, self._ray_directions = self.rays.world_rays(self.frames)
+        self._ray_fractions = self.caster.cast(origins, self._ray_directions, self.config.ray_range)
+        return self._ray_fractions
 
     def _observation(self, distance: float, rays: np.ndarray) -> np.ndarray:
         obs = np.empty(OBS_SIZE, dtype=np.float32)

@@ -23,6 +23,7 @@ from rayreach.env import ReachEnv
 from rayreach.kinematics import Kinematics
 from rayreach.planners import GlobalPlanner, PlanResult, ReactivePlanner, Status
 from rayreach.planners.collision import CollisionChecker
+from rayreach.safety import ACTING_SAFETY, SafetyLayer
 from rayreach.scenarios import Scenario
 from rayreach.scenarios.feasibility import goal_solutions
 
@@ -38,6 +39,9 @@ class ExecutionConfig:
     lookahead: int = 24
     """Control steps of the remaining path checked each step in replanning mode (0.1 s)."""
     max_replans: int = 10
+    safety: SafetyLayer = ACTING_SAFETY
+    """What the controller does to a reactive planner's actions (``rayreach.safety``);
+    ``SafetyLayer()``: the actions as they are."""
 
 
 @dataclass
@@ -110,7 +114,8 @@ class Executor:
     def __init__(self, scenario: str | Path | Scenario, robot: str | None = None,
                  config: ExecutionConfig = ExecutionConfig()) -> None:
         self.config = config
-        self.env = ReachEnv(robot=robot, scenario=scenario, goal_tolerance=config.goal_tolerance)
+        self.env = ReachEnv(robot=robot, scenario=scenario, goal_tolerance=config.goal_tolerance,
+                            safety=config.safety)
         self.kin = self.env.kin
         self.scene = self.env.scene
         self.checker = CollisionChecker(self.scene)

@@ -136,24 +136,30 @@ def read_bundle_meta(path: str | Path) -> tuple[dict[str, Any], dict[str, np.nda
 @dataclass(frozen=True)
 class FinalApproach:
     """Step straight at the goal once the policy has brought the end effector within
-    ``radius`` and no ray sees anything closer than ``clearance``.
+    ``radius`` and no ray sees anything nearer than the goal itself (plus ``margin``, and
+    never nearer than ``clearance``).
 
     Not in the paper. The mean action of a PPO policy trained with an enlarged goal tends to
-    settle 1-3 cm from the goal (the sampling noise did the last centimetre in training), so a
-    deterministic rollout times out beside a goal it has reached in all but name
-    (docs/training.md). Inside the radius the path is a straight 5 cm at most."""
+    settle a few centimetres from the goal (the sampling noise did the last centimetres in
+    training), so a deterministic rollout times out beside a goal it has reached in all but
+    name (docs/training.md). The straight path is ``radius`` long at most."""
 
-    radius: float = 0.05
-    """Half the enlarged goal the curriculum trains at (0.1 m); 0.1 itself cut through the
-    moving plate of exp3 (docs/training.md)."""
+    radius: float = 0.1
+    """The enlarged goal the curriculum trains at; the policy reliably comes this close."""
     clearance: float = 0.05
+    """Least free ray distance, m, however close the goal."""
+    margin: float = 0.02
+    """Free ray distance required beyond the goal's distance, m: a straight 10 cm with only
+    5 cm of clearance drove into exp3's moving plate (docs/training.md)."""
     ee_step: float = 0.005
     """The robot's largest translation per action, m (``load_policy`` sets it from the spec)."""
     ray_range: float = RAY_RANGE
 
     def action(self, obs: np.ndarray) -> np.ndarray | None:
         """The straight step for this observation, or None to leave it to the policy."""
-        if obs[12] >= self.radius or float(np.min(obs[-N_RAYS:])) * self.ray_range < self.clearance:
+        distance = float(obs[12])
+        free = float(np.min(obs[-N_RAYS:])) * self.ray_range
+        if distance >= self.radius or free < max(self.clearance, distance + self.margin):
             return None
         action = np.zeros(6, dtype=np.float32)
         action[:3] = np.clip(obs[6:9] / self.ee_step, -1.0, 1.0)

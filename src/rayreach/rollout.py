@@ -10,6 +10,7 @@ from tqdm import tqdm
 
 from rayreach.env import ReachEnv
 from rayreach.policy import FinalApproach, load_policy
+from rayreach.safety import ACTING_SAFETY, SafetyLayer
 from rayreach.scenarios import RANDOM
 
 EVAL_SEED_OFFSET = 1_000_000
@@ -28,6 +29,7 @@ class RolloutSummary:
     collisions: int
     deterministic: bool
     final_approach: bool
+    safety: dict[str, float]
     per_episode: list[dict] = field(default_factory=list)
 
     def to_dict(self, with_episodes: bool = False) -> dict:
@@ -47,12 +49,14 @@ def rollout(
     seed: int = EVAL_SEED_OFFSET,
     progress: bool = True,
     final_approach: FinalApproach | None = FinalApproach(),
+    safety: SafetyLayer = ACTING_SAFETY,
 ) -> RolloutSummary:
     """``episodes`` episodes of the policy at ``goal_tolerance``. Random worlds use the
     final obstacle count of training unless ``n_obstacles`` is given. ``final_approach``
-    None measures the policy alone."""
+    None and ``SafetyLayer()`` measure the policy alone."""
     policy = load_policy(model, final_approach=final_approach)
-    env = ReachEnv(robot=policy.robot, scenario=scenario, goal_tolerance=goal_tolerance)
+    env = ReachEnv(robot=policy.robot, scenario=scenario, goal_tolerance=goal_tolerance,
+                   safety=safety)
     if scenario == RANDOM:
         trained = policy.meta.get("state", {}).get("obstacles", {}).get("count", 0)
         env.set_n_obstacles(trained if n_obstacles is None else n_obstacles)
@@ -85,5 +89,6 @@ def rollout(
         collisions=collisions,
         deterministic=deterministic,
         final_approach=final_approach is not None,
+        safety=asdict(safety),
         per_episode=records,
     )

@@ -1,0 +1,100 @@
+"""The safety layer: each rule on its own, then in the env against PyBullet's contacts."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from rayreach.env import ReachEnv
+from rayreach.safety import ACTING_SAFETY, SafetyLayer
+from rayreach.scenarios import get_scenario
+from rayreach.scenarios.schema import ObstacleSpec
+
+FAR = np.full(3, 0.4)
+X, Y, Z = np.eye(3)
+LOW, HIGH = np.array([-0.4, 0.3, 0.2]), np.array([0.4, 0.7, 0.5])
+INSIDE = np.array([0.0, 0.5, 0.35])
+
+
+def test_shield_drops_only_the_motion_towards_what_a_near_ray_sees():
+    shield = SafetyLayer(ray_shield=0.05)
+    delta = np.array([0.005, 0.003, -0.004, 0.002, 0.0, 0.001])
+    directions = np.stack((X, Y, Z))
+    out = shield.filter(delta, INSIDE, LOW, HIGH, np.array([0.03, 0.4, 0.4]), directions)
+    np.testing.assert_allclose(out, [0.0, 0.003, -0.004, 0.0, 0.0, 0.0])
+    away = shield.filter(-delta, INSIDE, LOW, HIGH, np.array([0.03, 0.4, 0.4]), directions)
+    np.testing.assert_allclose(away[:3], -delta[:3])  # moving away from it is left alone
+    np.testing.assert_allclose(shield.filter(delta, INSIDE, LOW, HIGH, FAR, directions), delta)
+
+
+def test_shield_handles_an_oblique_ray_and_several_near_rays():
+    shield = SafetyLayer(ray_shield=0.05)
+    diagonal = (X + Y) / np.sqrt(2)
+    out = shield.filter(np.array([0.005, 0, 0, 0, 0, 0]), INSIDE, LOW, HIGH,
+                        np.array([0.01, 0.4]), np.stack((diagonal, Z)))
+    np.testing.assert_allclose(out[:3], [0.0025, -0.0025, 0.0], atol=1e-12)
+    assert out[:3] @ diagonal == pytest.approx(0.0, abs=1e-12)
+    both = shield.filter(np.array([0.005, 0.005, 0.005, 0, 0, 0]), INSIDE, LOW, HIGH,
+                         np.array([0.02, 0.04, 0.4]), np.stack((X, Y, Z)))
+    np.testing.assert_allclose(both[:3], [0.0, 0.0, 0.005])
+
+
+def test_guard_stops_at_a_bound_and_lets_the_tool_slide_along_it():
+    guard = SafetyLayer(workspace_guard=0.01)
+    near_top = np.array([0.0, 0.5, 0.487])
+    out = guard.filter(np.array([0.005, -0.005, 0.005, 0.001, 0, 0]), near_top, LOW, HIGH, FAR, np.eye(3))
+    np.testing.assert_allclose(out, [0.005, -0.005, 0.0, 0.001, 0, 0])
+    down = guard.filter(np.array([0, 0, -0.005, 0, 0, 0]), near_top, LOW, HIGH, FAR, np.eye(3))
+    assert down[2] == -0.005
+
+
+def test_negative_settings_are_refused():
+    with pytest.raises(ValueError, match="ray_shield must be >= 0"):
+        SafetyLayer(ray_shield=-0.1)
+    with pytest.raises(ValueError, match="workspace_guard must be >= 0"):
+        SafetyLayer(workspace_guard=-0.01)
+
+
+def _push_into_a_box(safety: SafetyLayer, steps: int = 60):
+    """The UR5 at exp1's start, a box face 9 cm to the -x of the tool point, the action pushing -x."""
+    scenario = get_scenario("exp1")
+    probe = ReachEnv(robot="ur5", scenario=scenario)
+    _, info = probe.reset(seed=0)
+    probe.close()
+    x, y, z = info["ee_position"]
+    box = ObstacleSpec("box", (x - 0.14, y, z), half_extents=(0.05, 0.15, 0.15))
+    env = ReachEnv(robot="ur5", scenario=dataclasses.replace(scenario, obstacles=(box,)), safety=safety)
+    try:
+        env.reset(seed=0)
+        for k in range(steps):
+            _, _, terminated, _, info = env.step(np.array([-1, 0, 0, 0, 0, 0], np.float32))
+            if terminated:
+                return k + 1, info
+        return steps, info
+    finally:
+        env.close()
+
+
+def test_shield_keeps_the_tool_off_a_box_the_policy_drives_into():
+    steps, info = _push_into_a_box(SafetyLayer())
+    assert info["collision"] and steps < 60  # the push alone hits the box
+    steps, info = _push_into_a_box(ACTING_SAFETY)
+    assert steps == 60 and not info["collision"]
+
+
+def test_env_guard_holds_the_tool_inside_exp1():
+    """-y leaves exp1's workspace (y >= 0.3) after 20 steps from y = 0.4; guarded, the tool
+    stops 1 cm inside and keeps moving along x."""
+    env = ReachEnv(robot="ur5", scenario="exp1", safety=SafetyLayer(workspace_guard=0.01))
+    try:
+        env.reset(seed=0)
+        x0 = env.ee_pos[0]
+        for _ in range(40):
+            _, _reward, terminated, _truncated, info = env.step(np.array([0.3, -1, 0, 0, 0, 0], np.float32))
+            assert not terminated and not info["out_of_bounds"]
+        assert 0.31 - 0.005 <= env.ee_pos[1] <= 0.31 + 1e-3
+        assert env.ee_pos[0] == pytest.approx(x0 + 40 * 0.3 * 0.005, abs=2e-3)
+    finally:
+        env.close()
