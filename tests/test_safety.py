@@ -41,6 +41,23 @@ def test_shield_handles_an_oblique_ray_and_several_near_rays():
     np.testing.assert_allclose(both[:3], [0.0, 0.0, 0.005])
 
 
+def test_no_near_ray_is_approached_when_the_projections_interact():
+    """Two near rays 135 degrees apart: one projection each would leave motion towards the
+    nearer; so would a bound the tool is at, zeroing an axis after the shield."""
+    shield = SafetyLayer(ray_shield=0.05)
+    a, b = X, np.array([-1.0, 1.0, 0.0]) / np.sqrt(2)
+    out = shield.filter(np.array([0.005, 0.0, 0.0, 0, 0, 0]), INSIDE, LOW, HIGH,
+                        np.array([0.01, 0.02]), np.stack((a, b)))
+    assert out[:3] @ a <= 1e-9 and out[:3] @ b <= 1e-9
+    both = SafetyLayer(workspace_guard=0.01, ray_shield=0.05)
+    ahead_below = np.array([1.0, 0.0, -1.0]) / np.sqrt(2)
+    at_ceiling = np.array([0.0, 0.5, 0.495])
+    out = both.filter(np.array([0.005, 0.0, 0.0, 0, 0, 0]), at_ceiling, LOW, HIGH,
+                      np.array([0.02]), ahead_below[None])
+    assert out[:3] @ ahead_below <= 1e-9
+    assert out[2] <= 0.0
+
+
 def test_guard_stops_at_a_bound_and_lets_the_tool_slide_along_it():
     guard = SafetyLayer(workspace_guard=0.01)
     near_top = np.array([0.0, 0.5, 0.487])
@@ -85,7 +102,7 @@ def test_shield_keeps_the_tool_off_a_box_the_policy_drives_into():
 
 
 def test_env_guard_holds_the_tool_inside_exp1():
-    """-y leaves exp1's workspace (y >= 0.3) after 20 steps from y = 0.4; guarded, the tool
+    """-y leaves exp1's workspace (y >= 0.3) at step 21 from y = 0.4; guarded, the tool
     stops 1 cm inside and keeps moving along x."""
     env = ReachEnv(robot="ur5", scenario="exp1", safety=SafetyLayer(workspace_guard=0.01))
     try:

@@ -36,6 +36,7 @@ def test_shipped_policy_loads_with_metadata_and_runs_an_episode(robot, scenario)
     assert planner.policy.normalization is not None  # training's statistics travel with the policy
     assert record.outcome in {"success", "collision", "timeout", "out of bounds"}
     assert 0 < record.steps <= 1024 and record.config["timesteps"] == meta["timesteps"]
+    assert record.config["safety"] == {"workspace_guard": 0.01, "ray_shield": 0.05}  # the executor's default
     assert np.isfinite(record.ee_path).all()
 
 

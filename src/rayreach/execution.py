@@ -196,7 +196,8 @@ class Executor:
                    else "out of bounds" if info["out_of_bounds"] else "timeout")
         ee_path = np.asarray(ee)
         length = polyline_length(ee_path)
-        return self._record(planner, seed, outcome=outcome, plan_status=Status.SOLVED.value,
+        return self._record(planner, seed, config={**planner.config(), "safety": asdict(self.config.safety)},
+                            outcome=outcome, plan_status=Status.SOLVED.value,
                             success=bool(info["is_success"]), collision=bool(info["collision"]),
                             path_length=length, path_length_unsmoothed=length,
                             joint_path_length=polyline_length(np.asarray(joints)), planning_time=compute,

@@ -10,12 +10,18 @@ its end-effector position) plus the workspace bounds; it never looks at the obst
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 
 
 @dataclass(frozen=True)
 class SafetyLayer:
+    MAX_ROUNDS: ClassVar[int] = 20
+    """Rounds of projections before the translation is stopped instead."""
+    TOLERANCE: ClassVar[float] = 1e-9
+    """Motion towards a near ray below this, m, counts as none."""
+
     workspace_guard: float = 0.0
     """Drop the translation towards a workspace bound once the step would bring the end
     effector within this distance of it, m, so the tool slides along the bound; 0: off
@@ -36,21 +42,35 @@ class SafetyLayer:
     def filter(self, delta: np.ndarray, ee_pos: np.ndarray, low: np.ndarray, high: np.ndarray,
                ray_distances: np.ndarray, ray_directions: np.ndarray) -> np.ndarray:
         """``delta`` (dx, dy, dz, rotation vector) as the arm may execute it. ``ray_distances``
-        (m) and unit ``ray_directions`` are those of the current observation."""
+        (m) and unit ``ray_directions`` are those of the current observation.
+
+        Each rule is a half-space the translation must lie in; removing one violation can
+        create another (two near rays at an obtuse angle, a near ray and a bound), so the
+        projections repeat until every rule holds, and the translation stops if they do not
+        settle."""
         out = np.array(delta, dtype=float)
-        if self.ray_shield > 0:
-            near = np.flatnonzero(ray_distances < self.ray_shield)
-            if near.size:
-                out[3:] = 0.0
-                for i in near[np.argsort(ray_distances[near])]:
-                    towards = out[:3] @ ray_directions[i]
-                    if towards > 0:
-                        out[:3] -= towards * ray_directions[i]
-        if self.workspace_guard > 0:
-            target = ee_pos + out[:3]
-            leaving = ((target > high - self.workspace_guard) & (out[:3] > 0)) | (
-                (target < low + self.workspace_guard) & (out[:3] < 0))
-            out[:3][leaving] = 0.0
+        near = np.flatnonzero(ray_distances < self.ray_shield) if self.ray_shield > 0 else np.zeros(0, int)
+        if near.size:
+            out[3:] = 0.0
+        directions = ray_directions[near[np.argsort(ray_distances[near])]]
+        move = out[:3]
+        for _ in range(self.MAX_ROUNDS):
+            settled = True
+            for direction in directions:
+                towards = move @ direction
+                if towards > self.TOLERANCE:
+                    move -= towards * direction
+                    settled = False
+            if self.workspace_guard > 0:
+                target = ee_pos + move
+                leaving = ((target > high - self.workspace_guard) & (move > 0)) | (
+                    (target < low + self.workspace_guard) & (move < 0))
+                if leaving.any():
+                    move[leaving] = 0.0
+                    settled = False
+            if settled:
+                return out
+        move[:] = 0.0
         return out
 
 
