@@ -237,7 +237,7 @@ def clone_into_checkpoint(run: str | Path, kind: str, config: CloneConfig = Clon
     model = PPO.load(str(checkpoint), device="cpu")
     policy = model.policy
     expert: Expert = EXPERTS[kind](ee_step=spec.ee_step, rot_step=spec.rot_step)
-    # acting as the DRL planner does (with the final approach), and the actor alone
+    # acting as the DRL planner does (with the final approach; without the executor's safety layer), and the actor alone
     as_planner = Policy(model, normalize, meta, checkpoint, FinalApproach(ee_step=spec.ee_step))
     alone = replace(as_planner, final_approach=None)
 
