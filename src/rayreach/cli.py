@@ -339,19 +339,18 @@ def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
 
 def _rollout(args: argparse.Namespace, scenario: str) -> int:
     from rayreach.policy import FinalApproach
-    from rayreach.rollout import rollout
+    from rayreach.rollout import EVAL_SEED_OFFSET, rollout
     from rayreach.safety import SafetyLayer
 
+    safety = SafetyLayer(args.workspace_guard, args.ray_shield)
     summary = rollout(args.model, scenario, episodes=args.episodes, deterministic=not args.stochastic,
                       goal_tolerance=args.tolerance, n_obstacles=args.obstacles, progress=not args.json,
-                      final_approach=None if args.no_final_approach else FinalApproach(),
-                      safety=SafetyLayer(args.workspace_guard, args.ray_shield),
-                      **({} if args.seed is None else {"seed": args.seed}))
+                      final_approach=None if args.no_final_approach else FinalApproach(), safety=safety,
+                      seed=EVAL_SEED_OFFSET if args.seed is None else args.seed)
     if args.json:
         print(json.dumps({"scenario": scenario, **summary.to_dict()}))
         return 0
-    helpers = [name for name, on in (("final approach", summary.final_approach),
-                                     ("safety layer", any(summary.safety.values()))) if on]
+    helpers = [name for name, on in (("final approach", summary.final_approach), ("safety layer", safety.active)) if on]
     mode = ("deterministic" if summary.deterministic else "stochastic") + ", " + (" + ".join(helpers) or "policy alone")
     print(f"{scenario}: {summary.episodes} episodes ({mode}), success {summary.success_rate:.1%}, "
           f"collisions {summary.collision_rate:.1%}, mean path {summary.path_length_mean:.3f} m, "
