@@ -9,11 +9,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from rayreach.env import N_ROBOT_OBS, OBS_SIZE
 from rayreach.execution import Executor
 from rayreach.planners import make_planner
 from rayreach.planners.drl import MODELS_DIR
-from rayreach.policy import FinalApproach
 
 CASES = [("ur5", "exp1"), ("kr16", "exp4")]
 
@@ -36,7 +34,8 @@ def test_shipped_policy_loads_with_metadata_and_runs_an_episode(robot, scenario)
     assert planner.policy.normalization is not None  # training's statistics travel with the policy
     assert record.outcome in {"success", "collision", "timeout", "out of bounds"}
     assert 0 < record.steps <= 1024 and record.config["timesteps"] == meta["timesteps"]
-    assert record.config["safety"] == {"workspace_guard": 0.01, "ray_shield": 0.05}  # the executor's default
+    assert record.config["safety"] == {"workspace_guard": 0.01, "ray_shield": 0.05}  # the executor's defaults
+    assert record.config["final_approach"] == {"radius": 0.1, "margin": 0.02, "ee_step": 0.005}
     assert np.isfinite(record.ee_path).all()
 
 
@@ -64,27 +63,6 @@ def test_shipped_kr16_policy_reaches_exp4_at_the_true_goal_size():
     _planner, record = _shipped_run("kr16", "exp4")
     assert record.outcome == "success" and not record.collision
     assert record.path_length < 1.2  # the paper's DRL path 0.91 m
-
-
-def test_final_approach_steps_straight_only_near_the_goal_and_with_the_way_clear():
-    approach = FinalApproach(radius=0.1, clearance=0.05, margin=0.02, ee_step=0.005, ray_range=0.4)
-    obs = np.zeros(OBS_SIZE, dtype=np.float32)
-    obs[N_ROBOT_OBS:] = 1.0  # nothing within ray range
-    obs[6:9] = (0.03, -0.002, 0.0)
-    obs[12] = np.linalg.norm(obs[6:9])
-    np.testing.assert_allclose(approach.action(obs), [1.0, -0.4, 0.0, 0.0, 0.0, 0.0], atol=1e-6)
-    far = obs.copy()
-    far[6:9], far[12] = (0.11, 0.0, 0.0), 0.11
-    assert approach.action(far) is None
-    crowded = obs.copy()
-    crowded[N_ROBOT_OBS + 40] = 0.1  # something 4 cm from a ray origin: within the 5 cm clearance
-    assert approach.action(crowded) is None
-    farther = obs.copy()
-    farther[6:9], farther[12] = (0.08, 0.0, 0.0), 0.08
-    farther[N_ROBOT_OBS + 40] = 0.2  # 8 cm free: beyond the clearance, short of the goal + 2 cm
-    assert approach.action(farther) is None
-    farther[N_ROBOT_OBS + 40] = 0.26  # 10.4 cm free
-    np.testing.assert_allclose(approach.action(farther), [1.0, 0, 0, 0, 0, 0], atol=1e-6)
 
 
 def test_a_drl_model_for_the_other_robot_is_refused():

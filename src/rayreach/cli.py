@@ -92,6 +92,10 @@ def build_parser() -> argparse.ArgumentParser:
     train.add_argument("--separate-features", action="store_true", help="actor and critic get their own extractor")
     train.add_argument("--obstacles", type=int, default=None,
                        help="fix the obstacle count (no obstacle curriculum; also holds a resumed run's count)")
+    train.add_argument("--acting-layers", action="store_true",
+                       help="train with the final approach and safety layer the planner acts with (kept on --resume)")
+    train.add_argument("--critic-warmup", type=int, default=0,
+                       help="steps at the start of this part in which only the critic learns (after clone)")
     train.add_argument("--goal-size", type=float, default=None, help="fix the goal size, m (no goal curriculum)")
     train.add_argument("--true-goal-share", type=float, default=None,
                        help="share of episodes at the true goal size while the goal is enlarged (default 0.5; "
@@ -330,9 +334,12 @@ def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
         config = replace(config, goal=GoalSizeParams(rho=args.goal_size, e_zeta=2**62))
     if args.true_goal_share is not None:
         overrides["true_goal_share"] = args.true_goal_share
+    if args.acting_layers:
+        overrides["acting_layers"] = True
     config = replace(config, **overrides)
     command = "rayreach " + " ".join(sys.argv[1:] if argv is None else argv)
-    path = train(config, args.out, resume=args.resume, command=command, resume_overrides=overrides)
+    path = train(config, args.out, resume=args.resume, command=command, resume_overrides=overrides,
+                 critic_warmup=args.critic_warmup)
     print(f"model: {path}")
     return 0
 

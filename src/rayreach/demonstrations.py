@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import json
 import time
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any, Callable, Protocol
 
@@ -181,7 +181,9 @@ def _world_env(robot: str, n_obstacles: int, kinds: tuple[str, ...], goal_tolera
     from rayreach.env import EnvConfig, ReachEnv
     from rayreach.scenarios.random_world import RandomWorldConfig
 
-    config = EnvConfig(goal_tolerance=goal_tolerance, random_world=RandomWorldConfig(n_obstacles=n_obstacles, kinds=kinds))
+    # episodes are played as the DRL planner acts: with the final approach, without the executor's safety layer
+    config = EnvConfig(goal_tolerance=goal_tolerance, random_world=RandomWorldConfig(n_obstacles=n_obstacles, kinds=kinds),
+                       final_approach=FinalApproach())
     return ReachEnv(robot=robot, scenario="random", config=config)
 
 
@@ -237,9 +239,7 @@ def clone_into_checkpoint(run: str | Path, kind: str, config: CloneConfig = Clon
     model = PPO.load(str(checkpoint), device="cpu")
     policy = model.policy
     expert: Expert = EXPERTS[kind](ee_step=spec.ee_step, rot_step=spec.rot_step)
-    # acting as the DRL planner does (with the final approach; without the executor's safety layer), and the actor alone
-    as_planner = Policy(model, normalize, meta, checkpoint, FinalApproach(ee_step=spec.ee_step))
-    alone = replace(as_planner, final_approach=None)
+    actor = Policy(model, normalize, meta, checkpoint)
 
     def actor_mean(raw: np.ndarray) -> torch.Tensor:
         return policy.get_distribution(torch.as_tensor(normalize(raw))).distribution.mean
@@ -251,18 +251,19 @@ def clone_into_checkpoint(run: str | Path, kind: str, config: CloneConfig = Clon
     anchor_env = _world_env(robot, n_obstacles, others, anchor_tolerance)
     expert_env = _world_env(robot, 1, (kind,), float(meta["config"]["goal"]["rho_min"]))  # the true task
     try:
-        anchor_obs, _, anchor_before = _play(anchor_env, as_planner.act, lambda o, e: o, config.anchor_episodes,
+        anchor_obs, _, anchor_before = _play(anchor_env, actor.act, lambda o, e: o, config.anchor_episodes,
                                              config.seed + 10_000, "anchor", progress)
         with torch.no_grad():
             anchor_labels = [actor_mean(np.asarray(anchor_obs)).numpy()] if anchor_obs else []
-        expert_before = _play(expert_env, as_planner.act, None, config.eval_episodes, config.seed + 20_000, "before",
+        expert_before = _play(expert_env, actor.act, None, config.eval_episodes, config.seed + 20_000, "before",
                               progress, expert.accepts)[2]
         expert_obs: list[np.ndarray] = []
         expert_labels: list[np.ndarray] = []
         optimiser = torch.optim.Adam(policy.parameters(), lr=config.learning_rate)
         rounds = []
+        expert_env.set_final_approach(None)  # the DAgger rounds follow the expert or the actor alone
         for r in range(config.rounds):
-            follow = (lambda o: expert.label(o, expert_env)) if r == 0 else alone.act
+            follow = (lambda o: expert.label(o, expert_env)) if r == 0 else actor.act
             obs, labels, outcome = _play(expert_env, follow, expert.label, config.episodes,
                                          config.seed + 1_000 * r, f"round {r + 1}", progress, expert.accepts)
             expert_obs += obs
@@ -272,9 +273,10 @@ def clone_into_checkpoint(run: str | Path, kind: str, config: CloneConfig = Clon
             loss = _fit(policy, optimiser, x, y, config.epochs, config.batch_size)
             rounds.append({"round": r + 1, "followed": "expert" if r == 0 else "cloned actor",
                            "success_rate": outcome["success"], "samples": len(y), "loss": loss})
-        expert_after = _play(expert_env, as_planner.act, None, config.eval_episodes, config.seed + 20_000, "after",
+        expert_env.set_final_approach(FinalApproach())
+        expert_after = _play(expert_env, actor.act, None, config.eval_episodes, config.seed + 20_000, "after",
                              progress, expert.accepts)[2]
-        _, _, anchor_after = _play(anchor_env, as_planner.act, None, config.anchor_episodes, config.seed + 10_000,
+        _, _, anchor_after = _play(anchor_env, actor.act, None, config.anchor_episodes, config.seed + 10_000,
                                    "anchor after", progress)
     finally:
         anchor_env.close()

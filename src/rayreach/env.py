@@ -51,6 +51,7 @@ import numpy as np
 
 from rayreach import rewards as R
 from rayreach.kinematics import IKParams, Kinematics
+from rayreach.policy import FinalApproach
 from rayreach.robots import RobotSpec, get_robot
 from rayreach.safety import SafetyLayer
 from rayreach.scenarios import RANDOM, Scenario, ScenarioError, get_scenario
@@ -88,6 +89,10 @@ class EnvConfig:
     safety: SafetyLayer = SafetyLayer()
     """Not in the paper: what the controller does to an action before the arm moves; off in
     training, ``rayreach.safety.ACTING_SAFETY`` in the executor and ``rollout``."""
+    final_approach: FinalApproach | None = None
+    """Not in the paper: replace the action by the straight step at the goal when
+    ``rayreach.policy.FinalApproach`` says so; off in training, on in the executor and
+    ``rollout``."""
     rewards: R.RewardWeights = R.RewardWeights()
     random_world: RandomWorldConfig = field(default_factory=RandomWorldConfig)
 
@@ -162,6 +167,7 @@ class ReachEnv(gym.Env):
         ws_high = np.asarray(fixed.workspace_high if fixed else self.spec_robot.workspace_high)
         self.observation_space = observation_space(self.spec_robot, ws_high - ws_low)
         self._step_scale = np.array([self.spec_robot.ee_step] * 3 + [self.spec_robot.rot_step] * 3)
+        self.set_final_approach(self.config.final_approach)
 
         self.scenario: Scenario | None = None
         self._fixed_start: np.ndarray | None = None
@@ -183,6 +189,11 @@ class ReachEnv(gym.Env):
     def set_goal_tolerance(self, tolerance: float) -> None:
         """Change the success radius (used by the goal-size curriculum between episodes)."""
         self.config = make_config(self.config, {"goal_tolerance": float(tolerance)})
+
+    def set_final_approach(self, approach: FinalApproach | None) -> None:
+        """Act with ``approach`` (None: the actions as they come) from the next step on."""
+        self.config = make_config(self.config, {"final_approach": approach})
+        self._final_approach = None if approach is None else replace(approach, ee_step=self.spec_robot.ee_step)
 
     def set_n_obstacles(self, n: int) -> None:
         """Obstacles per random world from the next reset on (obstacle curriculum)."""
@@ -232,6 +243,10 @@ class ReachEnv(gym.Env):
             raise ValueError(f"action must have 6 values (dx, dy, dz, droll, dpitch, dyaw), got shape {np.shape(action)}")
         if not np.all(np.isfinite(a)):
             raise ValueError(f"action contains NaN or infinity: {a.tolist()}; the scene is unchanged")
+        if self._final_approach is not None:
+            straight = self._final_approach.action(self.goals[self.goal_index] - self.ee_pos, self.ray_hits())
+            if straight is not None:
+                a = straight
         delta = np.clip(a, -1.0, 1.0) * self._step_scale
         cfg = self.config
         if cfg.safety.active:
@@ -303,11 +318,18 @@ class ReachEnv(gym.Env):
         return self._observation(distance, rays), float(sum(terms.values())), terminated, truncated, info
 
     def _cast_rays(self) -> np.ndarray:
-        """Hit fractions of the rays in the current state (kept, with the directions, for
-        the safety layer)."""
-        origins, self._ray_directions = self.rays.world_rays(self.frames)
-        self._ray_fractions = self.caster.cast(origins, self._ray_directions, self.config.ray_range)
+        """Hit fractions of the rays in the current state (kept, with the rays, for the
+        final approach and the safety layer)."""
+        self._ray_origins, self._ray_directions = self.rays.world_rays(self.frames)
+        self._ray_fractions = self.caster.cast(self._ray_origins, self._ray_directions, self.config.ray_range)
         return self._ray_fractions
+
+    def ray_hits(self) -> np.ndarray:
+        """The points the rays see now, relative to the end effector, m, shape (n, 3); rays
+        that see nothing within range are left out."""
+        hit = self._ray_fractions < 1.0
+        reach = self._ray_fractions[hit, None] * self.config.ray_range
+        return self._ray_origins[hit] + self._ray_directions[hit] * reach - self.ee_pos
 
     def _observation(self, distance: float, rays: np.ndarray) -> np.ndarray:
         obs = np.empty(OBS_SIZE, dtype=np.float32)

@@ -23,6 +23,7 @@ from rayreach.env import ReachEnv
 from rayreach.kinematics import Kinematics
 from rayreach.planners import GlobalPlanner, PlanResult, ReactivePlanner, Status
 from rayreach.planners.collision import CollisionChecker
+from rayreach.policy import FinalApproach
 from rayreach.safety import ACTING_SAFETY, SafetyLayer
 from rayreach.scenarios import Scenario
 from rayreach.scenarios.feasibility import goal_solutions
@@ -42,6 +43,9 @@ class ExecutionConfig:
     safety: SafetyLayer = ACTING_SAFETY
     """What the controller does to a reactive planner's actions (``rayreach.safety``);
     ``SafetyLayer()``: the actions as they are."""
+    final_approach: FinalApproach | None = FinalApproach()
+    """The straight step at a goal a reactive planner has nearly reached
+    (``rayreach.policy.FinalApproach``); None: the planner's actions to the end."""
 
 
 @dataclass
@@ -115,7 +119,7 @@ class Executor:
                  config: ExecutionConfig = ExecutionConfig()) -> None:
         self.config = config
         self.env = ReachEnv(robot=robot, scenario=scenario, goal_tolerance=config.goal_tolerance,
-                            safety=config.safety)
+                            safety=config.safety, final_approach=config.final_approach)
         self.kin = self.env.kin
         self.scene = self.env.scene
         self.checker = CollisionChecker(self.scene)
@@ -172,6 +176,12 @@ class Executor:
             return self._run_reactive(planner, seed)
         return self._run_global(planner, seed)
 
+    def _acting(self) -> dict[str, Any]:
+        """What acted between a reactive planner and the arm, for its run records."""
+        approach = self.config.final_approach
+        return {"safety": asdict(self.config.safety),
+                "final_approach": asdict(approach) if approach is not None else None}
+
     def _record(self, planner, seed: int, **values: Any) -> RunRecord:
         values.setdefault("config", planner.config())
         values["execution_time"] = values["planning_time"] + values["motion_time"]
@@ -196,7 +206,7 @@ class Executor:
                    else "out of bounds" if info["out_of_bounds"] else "timeout")
         ee_path = np.asarray(ee)
         length = polyline_length(ee_path)
-        return self._record(planner, seed, config={**planner.config(), "safety": asdict(self.config.safety)},
+        return self._record(planner, seed, config={**planner.config(), **self._acting()},
                             outcome=outcome, plan_status=Status.SOLVED.value,
                             success=bool(info["is_success"]), collision=bool(info["collision"]),
                             path_length=length, path_length_unsmoothed=length,

@@ -13,13 +13,11 @@ import json
 import os
 import tempfile
 import zipfile
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-
-from rayreach.sensors import N_RAYS, RAY_RANGE
 
 META_ENTRY = "rayreach/meta.json"
 NORM_ENTRY = "rayreach/normalization.npz"
@@ -136,62 +134,61 @@ def read_bundle_meta(path: str | Path) -> tuple[dict[str, Any], dict[str, np.nda
 @dataclass(frozen=True)
 class FinalApproach:
     """Step straight at the goal once the policy has brought the end effector within
-    ``radius`` and no ray sees anything nearer than the goal itself (plus ``margin``, and
-    never nearer than ``clearance``).
+    ``radius`` and everything the rays see lies at least ``margin`` from that straight path.
 
     Not in the paper. The mean action of a PPO policy trained with an enlarged goal tends to
     settle a few centimetres from the goal (the sampling noise did the last centimetres in
     training), so a deterministic rollout times out beside a goal it has reached in all but
-    name (docs/training.md). The straight path is ``radius`` long at most."""
+    name (docs/training.md, "Acting"). The environment applies it
+    (``EnvConfig.final_approach``), where the rays' hit points are known. The straight path is
+    ``radius`` long at most."""
 
     radius: float = 0.1
-    """The enlarged goal the curriculum trains at; the policy reliably comes this close."""
-    clearance: float = 0.05
-    """Least free ray distance, m, however close the goal."""
+    """The enlarged goal the curriculum trains at; the policy reliably comes this close. At
+    0.15 m and more the UR5's arm, which no ray watches, met more obstacles."""
     margin: float = 0.02
-    """Free ray distance required beyond the goal's distance, m: a straight 10 cm with only
-    5 cm of clearance drove into exp3's moving plate (docs/training.md)."""
+    """Least distance, m, from the straight path to anything a ray sees. Testing the path
+    rather than every ray lets the tool pass beside a wall next to the goal."""
     ee_step: float = 0.005
-    """The robot's largest translation per action, m (``load_policy`` sets it from the spec)."""
-    ray_range: float = RAY_RANGE
+    """The robot's largest translation per action, m (the environment sets it from the spec)."""
 
-    def action(self, obs: np.ndarray) -> np.ndarray | None:
-        """The straight step for this observation, or None to leave it to the policy."""
-        distance = float(obs[12])
-        free = float(np.min(obs[-N_RAYS:])) * self.ray_range
-        if distance >= self.radius or free < max(self.clearance, distance + self.margin):
+    def action(self, goal_offset: np.ndarray, hits: np.ndarray) -> np.ndarray | None:
+        """The straight step along ``goal_offset`` (goal minus end effector, m), or None to
+        leave it to the policy. ``hits``: the points the rays see, relative to the end
+        effector, shape (n, 3)."""
+        goal_offset = np.asarray(goal_offset, dtype=float)
+        distance = float(np.linalg.norm(goal_offset))
+        if distance >= self.radius:
             return None
+        if len(hits):
+            along = np.clip(hits @ goal_offset / max(distance**2, 1e-12), 0.0, 1.0)
+            if np.linalg.norm(hits - along[:, None] * goal_offset, axis=1).min() < self.margin:
+                return None
         action = np.zeros(6, dtype=np.float32)
-        action[:3] = np.clip(obs[6:9] / self.ee_step, -1.0, 1.0)
+        action[:3] = np.clip(goal_offset / self.ee_step, -1.0, 1.0)
         return action
 
 
 @dataclass
 class Policy:
-    """A loaded policy: ``act(obs)`` normalises with the frozen statistics and runs the actor
-    (then the final approach, if one is set)."""
+    """A loaded policy: ``act(obs)`` normalises with the frozen statistics and runs the actor."""
 
     model: Any
     normalization: Normalization | None
     meta: dict[str, Any]
     path: Path
-    final_approach: FinalApproach | None = None
 
     @property
     def robot(self) -> str:
         return str(self.meta["robot"])
 
     def act(self, obs: np.ndarray, deterministic: bool = True) -> np.ndarray:
-        if self.final_approach is not None:
-            straight = self.final_approach.action(obs)
-            if straight is not None:
-                return straight
         x = self.normalization(obs) if self.normalization is not None else obs
         action, _ = self.model.predict(x, deterministic=deterministic)
         return action
 
 
-def load_policy(path: str | Path, device: str = "cpu", final_approach: FinalApproach | None = None) -> Policy:
+def load_policy(path: str | Path, device: str = "cpu") -> Policy:
     """Load a model or checkpoint bundle for acting (normalisation frozen).
 
     Sets torch to one thread: acting runs one observation per call, where intra-op threads
@@ -209,12 +206,7 @@ def load_policy(path: str | Path, device: str = "cpu", final_approach: FinalAppr
     obs_size = model.observation_space.shape
     if tuple(obs_size) != tuple(meta.get("obs_shape", obs_size)):
         raise CheckpointError(f"{path}: observation shape {obs_size} does not match its metadata")
-    normalization = Normalization.from_arrays(norm)
-    if final_approach is not None:
-        from rayreach.robots import get_robot
-
-        final_approach = replace(final_approach, ee_step=get_robot(meta["robot"]).ee_step)
-    return Policy(model, normalization, meta, Path(path), final_approach)
+    return Policy(model, Normalization.from_arrays(norm), meta, Path(path))
 
 
 def export_bundle(source: str | Path, target: str | Path) -> tuple[Path, Path]:

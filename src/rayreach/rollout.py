@@ -54,9 +54,9 @@ def rollout(
     """``episodes`` episodes of the policy at ``goal_tolerance``. Random worlds use the
     final obstacle count of training unless ``n_obstacles`` is given. ``final_approach``
     None and ``SafetyLayer()`` measure the policy alone."""
-    policy = load_policy(model, final_approach=final_approach)
+    policy = load_policy(model)
     env = ReachEnv(robot=policy.robot, scenario=scenario, goal_tolerance=goal_tolerance,
-                   safety=safety)
+                   safety=safety, final_approach=final_approach)
     if scenario == RANDOM:
         trained = policy.meta.get("state", {}).get("obstacles", {}).get("count", 0)
         env.set_n_obstacles(trained if n_obstacles is None else n_obstacles)

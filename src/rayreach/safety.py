@@ -76,4 +76,4 @@ class SafetyLayer:
 
 ACTING_SAFETY = SafetyLayer(workspace_guard=0.01, ray_shield=0.05)
 """The layer the executor and ``rollout`` act with: two 5 mm steps from a bound, and the
-final approach's 5 cm clearance (``rayreach.policy.FinalApproach``)."""
+final approach's 2 cm margin (``rayreach.policy.FinalApproach``)."""

@@ -77,6 +77,10 @@ class TrainConfig:
     true_goal_share: float = 0.5
     """Share of episodes played at the true goal size rho_min while the curriculum enlarges
     the goal (not in the paper; docs/training.md). They do not feed the goal-size curriculum."""
+    acting_layers: bool = False
+    """Play training episodes with the final approach and the safety layer the planner acts
+    with (not in the paper; docs/training.md, "Training as it acts"): collisions and exits
+    the layer would stop become waits, which the policy must learn to go around."""
     checkpoint_every: int = 100_000
     goal: GoalSizeParams = field(default_factory=GoalSizeParams)
     obstacles: ObstacleParams = field(default_factory=ObstacleParams)
@@ -91,6 +95,8 @@ def make_env_fn(config: TrainConfig, rank: int):
         from stable_baselines3.common.monitor import Monitor
 
         from rayreach.env import EnvConfig, ReachEnv
+        from rayreach.policy import FinalApproach
+        from rayreach.safety import ACTING_SAFETY, SafetyLayer
         from rayreach.scenarios.random_world import RandomWorldConfig
 
         env_config = EnvConfig(
@@ -100,6 +106,8 @@ def make_env_fn(config: TrainConfig, rank: int):
             max_steps=config.max_episode_steps,
             rewards=replace(RewardWeights(), progress=config.progress_weight, proximity=config.proximity_weight),
             random_world=RandomWorldConfig(n_obstacles=config.obstacles.start),
+            final_approach=FinalApproach() if config.acting_layers else None,
+            safety=ACTING_SAFETY if config.acting_layers else SafetyLayer(),
         )
         env = ReachEnv(robot=config.robot, scenario="random", config=env_config)
         env.reset(seed=config.seed * 10_000 + rank)
@@ -152,6 +160,21 @@ def build_model(config: TrainConfig, venv, tensorboard_dir: str | None):
         device=config.device,
         verbose=0,
     )
+
+
+def set_actor_trainable(policy, trainable: bool) -> None:
+    """Freeze (or free) every parameter but the critic's own layers.
+
+    A checkpoint whose actor was just refitted by cloning has a critic that values the old
+    actor, and through the shared extractor its first PPO updates would move the new actor
+    on those stale advantages; ``train(critic_warmup=N)`` fits the critic alone first."""
+    critic = [policy.mlp_extractor.value_net, policy.value_net]
+    if not policy.share_features_extractor:
+        critic.append(policy.vf_features_extractor)
+    own = {id(p) for module in critic for p in module.parameters()}
+    for p in policy.parameters():
+        if id(p) not in own:
+            p.requires_grad_(trainable)
 
 
 # ---------------------------------------------------------------------- bookkeeping
@@ -210,7 +233,7 @@ class TrainState:
         )
 
 
-def _make_callback(config: TrainConfig, state: TrainState, out: Path, total: int):
+def _make_callback(config: TrainConfig, state: TrainState, out: Path, total: int, critic_warmup: int = 0):
     import torch
     from stable_baselines3.common.callbacks import BaseCallback
     from tqdm import tqdm
@@ -229,6 +252,7 @@ def _make_callback(config: TrainConfig, state: TrainState, out: Path, total: int
             self.bar: Any = None
             self.t_start = 0.0
             self.wall_at_start = state.wall_time
+            self.actor_frozen_until = 0
 
         def _on_rollout_start(self) -> None:
             torch.set_num_threads(1)  # intra-op threads spin and starve the env workers
@@ -240,6 +264,9 @@ def _make_callback(config: TrainConfig, state: TrainState, out: Path, total: int
                             desc=f"train {config.robot}", smoothing=0.05)
             self.t_start = time.time()
             self._push(goal=True, obstacles=True)
+            if critic_warmup > 0:
+                self.actor_frozen_until = self.num_timesteps + critic_warmup
+                set_actor_trainable(self.model.policy, False)
 
         def _push(self, goal: bool, obstacles: bool) -> None:
             if goal:
@@ -278,6 +305,10 @@ def _make_callback(config: TrainConfig, state: TrainState, out: Path, total: int
 
         def _on_rollout_end(self) -> None:
             torch.set_num_threads(threads)  # the PPO update does gain from all cores
+            if self.actor_frozen_until and self.num_timesteps >= self.actor_frozen_until:
+                set_actor_trainable(self.model.policy, True)
+                self.actor_frozen_until = 0
+            self.logger.record("train/actor_frozen", int(bool(self.actor_frozen_until)))
             row = {"timesteps": self.num_timesteps, "episodes": state.episodes,
                    "wall_time": round(self.wall_time(), 1), "goal_size": state.goal.size,
                    "obstacles": state.obstacles.count}
@@ -368,12 +399,16 @@ def config_from_meta(meta: dict[str, Any]) -> TrainConfig:
 
 # ---------------------------------------------------------------------- entry point
 def train(config: TrainConfig, out: str | Path, resume: bool = False, command: str = "",
-          resume_overrides: dict[str, Any] | None = None) -> Path:
+          resume_overrides: dict[str, Any] | None = None, critic_warmup: int = 0) -> Path:
     """Train (or resume) into ``out``; returns the path of the final model bundle.
 
     A resumed run keeps its saved configuration except ``timesteps``, ``workers`` and the
     fields named in ``resume_overrides`` (e.g. a new ``true_goal_share`` for a second part, or
-    ``obstacles`` to hold the count, which restarts the obstacle curriculum)."""
+    ``obstacles`` to hold the count, which restarts the obstacle curriculum).
+    ``critic_warmup``: steps at the start of this part in which only the critic learns
+    (``set_actor_trainable``)."""
+    if critic_warmup < 0:
+        raise ValueError(f"critic_warmup must be >= 0 steps, got {critic_warmup}")
     out = Path(out)
     checkpoint = out / CHECKPOINT
     from stable_baselines3 import PPO
@@ -408,7 +443,7 @@ def train(config: TrainConfig, out: str | Path, resume: bool = False, command: s
         else:
             model = build_model(config, venv, tensorboard_dir)
         remaining = config.timesteps - model.num_timesteps
-        callback = _make_callback(config, state, out, config.timesteps)
+        callback = _make_callback(config, state, out, config.timesteps, critic_warmup)
         interrupted = False
         if remaining > 0:
             previous = signal.getsignal(signal.SIGTERM)

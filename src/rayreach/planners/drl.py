@@ -2,14 +2,13 @@
 
 from __future__ import annotations
 
-from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from rayreach.planners.base import ReactivePlanner
-from rayreach.policy import FinalApproach, load_policy
+from rayreach.policy import load_policy
 
 MODELS_DIR = Path(__file__).resolve().parents[3] / "models"
 """The repository's shipped policies (``models/ur5.zip``, ``models/kr16.zip``)."""
@@ -31,9 +30,8 @@ def shipped_model(robot: str) -> Path:
 class DRLPlanner(ReactivePlanner):
     name = "drl"
 
-    def __init__(self, model: str | Path, deterministic: bool = True,
-                 final_approach: FinalApproach | None = FinalApproach()) -> None:
-        self.policy = load_policy(model, final_approach=final_approach)
+    def __init__(self, model: str | Path, deterministic: bool = True) -> None:
+        self.policy = load_policy(model)
         self.deterministic = deterministic
 
     @property
@@ -45,7 +43,5 @@ class DRLPlanner(ReactivePlanner):
 
     def config(self) -> dict[str, Any]:
         meta = self.policy.meta
-        approach = self.policy.final_approach
         return {"planner": self.name, "model": str(self.policy.path), "deterministic": self.deterministic,
-                "final_approach": asdict(approach) if approach is not None else None,
                 "timesteps": meta.get("timesteps"), "git_commit": meta.get("git_commit")}

@@ -1,0 +1,137 @@
+"""The final approach: its path test on its own, the env's ray hit points against PyBullet's
+ray casts, and the straight step in a scene (PyBullet's contacts), for acting and training."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pybullet as p
+import pytest
+
+from rayreach.env import ReachEnv
+from rayreach.policy import FinalApproach
+from rayreach.scenarios import get_scenario
+from rayreach.scenarios.schema import ObstacleSpec
+from rayreach.train import TrainConfig, make_env_fn, set_actor_trainable
+
+APPROACH = FinalApproach(radius=0.1, margin=0.02, ee_step=0.005)
+NOTHING = np.zeros((0, 3))
+
+
+def test_steps_straight_only_within_the_radius():
+    np.testing.assert_allclose(APPROACH.action(np.array([0.03, -0.002, 0.0]), NOTHING),
+                               [1.0, -0.4, 0.0, 0.0, 0.0, 0.0], atol=1e-6)
+    assert APPROACH.action(np.array([0.11, 0.0, 0.0]), NOTHING) is None
+
+
+@pytest.mark.parametrize("hit,clear", [
+    ((0.04, 0.03, 0.0), True),     # a wall 3 cm beside the path: the tool passes it
+    ((0.04, 0.01, 0.0), False),    # 1 cm beside the path
+    ((0.09, 0.0, 0.015), False),   # 1.8 cm from the goal, beyond it
+    ((-0.015, 0.0, 0.0), False),   # 1.5 cm behind the tool
+    ((0.12, 0.0, 0.0), True),      # 4 cm past the goal
+    ((0.04, -0.2, 0.0), True),     # far to the side
+])
+def test_anything_a_ray_sees_within_the_margin_of_the_path_leaves_it_to_the_policy(hit, clear):
+    offset = np.array([0.08, 0.0, 0.0])
+    action = APPROACH.action(offset, np.array([hit, (0.3, 0.3, 0.3)]))
+    assert (action is not None) == clear
+    if clear:
+        np.testing.assert_allclose(action, [1.0, 0, 0, 0, 0, 0], atol=1e-6)
+
+
+def _exp1_with(obstacles, goal_offset, final_approach):
+    """exp1's UR5 and start, its goal ``goal_offset`` from the start's tool point, ``obstacles``
+    (functions of the tool point) instead of the plate."""
+    scenario = get_scenario("exp1")
+    probe = ReachEnv(robot="ur5", scenario=scenario)
+    _, info = probe.reset(seed=0)
+    probe.close()
+    ee = np.asarray(info["ee_position"])
+    scenario = dataclasses.replace(scenario, goals=(tuple(ee + goal_offset),),
+                                   obstacles=tuple(make(ee) for make in obstacles))
+    return ReachEnv(robot="ur5", scenario=scenario, final_approach=final_approach)
+
+
+def _wall_beside(ee):  # an upright plate 3 cm to the +y of the path, 4 cm tall above and below it
+    return ObstacleSpec("box", (ee[0] + 0.04, ee[1] + 0.035, ee[2]), half_extents=(0.05, 0.005, 0.04))
+
+
+def _wall_across(ee):  # the same plate turned across the path, 4 cm ahead
+    return ObstacleSpec("box", (ee[0] + 0.04, ee[1], ee[2]), half_extents=(0.005, 0.05, 0.04))
+
+
+def test_ray_hits_lie_where_pybullet_casts_them():
+    env = _exp1_with([_wall_beside], np.array([0.08, 0.0, 0.0]), None)
+    try:
+        env.reset(seed=0)
+        hits = env.ray_hits()
+        origins, directions = env.rays.world_rays(env.frames)
+        results = p.rayTestBatch(origins.tolist(), (origins + env.config.ray_range * directions).tolist(),
+                                 physicsClientId=env.scene.client)
+        seen = [r[3] for r in results if r[0] >= 0 and r[0] != env.scene.robot]  # the rays never see the arm
+        reference = np.array(seen) - env.ee_pos
+        assert len(hits) == len(reference) >= 5  # the wall is in view
+        np.testing.assert_allclose(hits, reference, atol=1e-4)
+    finally:
+        env.close()
+
+
+def _idle(env, steps=40):
+    """Steps with a zero action (a policy that stopped); the last info."""
+    env.reset(seed=0)
+    for _ in range(steps):
+        _, _, terminated, _, info = env.step(np.zeros(6, np.float32))
+        if terminated:
+            break
+    return info
+
+
+def test_env_steps_past_a_wall_beside_the_goal_and_stops_at_one_across_the_path():
+    env = _exp1_with([_wall_beside], np.array([0.08, 0.0, 0.0]), FinalApproach())
+    try:
+        info = _idle(env)
+        assert info["is_success"] and not info["collision"] and env.steps <= 17
+    finally:
+        env.close()
+    for approach in (None, FinalApproach()):  # without it, or with the way blocked, the tool stays put
+        env = _exp1_with([_wall_across], np.array([0.08, 0.0, 0.0]), approach)
+        try:
+            info = _idle(env)
+            assert not info["is_success"] and not info["collision"] and info["distance"] == pytest.approx(0.08, abs=1e-3)
+        finally:
+            env.close()
+
+
+def test_training_envs_act_with_the_layers_only_when_asked():
+    for acting in (False, True):
+        env = make_env_fn(TrainConfig(robot="ur5", acting_layers=acting), 0)().unwrapped
+        try:
+            assert (env.config.final_approach is not None) == acting
+            assert env.config.safety.active == acting
+        finally:
+            env.close()
+
+
+def test_critic_warmup_freezes_everything_but_the_critic_layers():
+    from stable_baselines3 import PPO
+
+    from rayreach.train import build_model, build_vec_env
+
+    config = TrainConfig(robot="ur5", envs=1, workers=1, n_steps=64, batch_size=32, n_epochs=1)
+    venv = build_vec_env(config)
+    try:
+        model: PPO = build_model(config, venv, None)
+        policy = model.policy
+        critic = {id(q) for m in (policy.mlp_extractor.value_net, policy.value_net) for q in m.parameters()}
+        set_actor_trainable(policy, False)
+        before = {name: q.detach().clone() for name, q in policy.named_parameters()}
+        model.learn(64)
+        for name, q in policy.named_parameters():
+            changed = not np.allclose(before[name].numpy(), q.detach().numpy())
+            assert changed == (id(q) in critic), name
+        set_actor_trainable(policy, True)
+        assert all(q.requires_grad for q in policy.parameters())
+    finally:
+        venv.close()
