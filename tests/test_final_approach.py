@@ -41,6 +41,12 @@ def test_anything_a_ray_sees_within_the_margin_of_the_path_leaves_it_to_the_poli
         np.testing.assert_allclose(action, [1.0, 0, 0, 0, 0, 0], atol=1e-6)
 
 
+@pytest.mark.parametrize("field,value", [("radius", 0.0), ("margin", -0.01), ("ee_step", float("nan"))])
+def test_bad_settings_are_refused_by_name(field, value):
+    with pytest.raises(ValueError, match=field):
+        FinalApproach(**{field: value})
+
+
 def _exp1_with(obstacles, goal_offset, final_approach):
     """exp1's UR5 and start, its goal ``goal_offset`` from the start's tool point, ``obstacles``
     (functions of the tool point) instead of the plate."""

@@ -91,8 +91,8 @@ class EnvConfig:
     training, ``rayreach.safety.ACTING_SAFETY`` in the executor and ``rollout``."""
     final_approach: FinalApproach | None = None
     """Not in the paper: replace the action by the straight step at the goal when
-    ``rayreach.policy.FinalApproach`` says so; off in training, on in the executor and
-    ``rollout``."""
+    ``rayreach.policy.FinalApproach`` says so; on in the executor and ``rollout``, off in
+    training unless ``TrainConfig.acting_layers``."""
     rewards: R.RewardWeights = R.RewardWeights()
     random_world: RandomWorldConfig = field(default_factory=RandomWorldConfig)
 

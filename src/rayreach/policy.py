@@ -152,6 +152,13 @@ class FinalApproach:
     ee_step: float = 0.005
     """The robot's largest translation per action, m (the environment sets it from the spec)."""
 
+    def __post_init__(self) -> None:
+        for name in ("radius", "ee_step"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"{name} must be positive, got {getattr(self, name)}")
+        if not self.margin >= 0:
+            raise ValueError(f"margin must be >= 0, got {self.margin}")
+
     def action(self, goal_offset: np.ndarray, hits: np.ndarray) -> np.ndarray | None:
         """The straight step along ``goal_offset`` (goal minus end effector, m), or None to
         leave it to the policy. ``hits``: the points the rays see, relative to the end
