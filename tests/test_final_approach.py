@@ -3,15 +3,12 @@ ray casts, and the straight step in a scene (PyBullet's contacts), for acting an
 
 from __future__ import annotations
 
-import dataclasses
-
 import numpy as np
 import pybullet as p
 import pytest
 
-from rayreach.env import ReachEnv
+from exp1_scenes import exp1_around_the_tool
 from rayreach.policy import FinalApproach
-from rayreach.scenarios import get_scenario
 from rayreach.scenarios.schema import ObstacleSpec
 from rayreach.train import TrainConfig, make_env_fn, set_actor_trainable
 
@@ -47,19 +44,6 @@ def test_bad_settings_are_refused_by_name(field, value):
         FinalApproach(**{field: value})
 
 
-def _exp1_with(obstacles, goal_offset, final_approach):
-    """exp1's UR5 and start, its goal ``goal_offset`` from the start's tool point, ``obstacles``
-    (functions of the tool point) instead of the plate."""
-    scenario = get_scenario("exp1")
-    probe = ReachEnv(robot="ur5", scenario=scenario)
-    _, info = probe.reset(seed=0)
-    probe.close()
-    ee = np.asarray(info["ee_position"])
-    scenario = dataclasses.replace(scenario, goals=(tuple(ee + goal_offset),),
-                                   obstacles=tuple(make(ee) for make in obstacles))
-    return ReachEnv(robot="ur5", scenario=scenario, final_approach=final_approach)
-
-
 def _wall_beside(ee):  # an upright plate 3 cm to the +y of the path, 4 cm tall above and below it
     return ObstacleSpec("box", (ee[0] + 0.04, ee[1] + 0.035, ee[2]), half_extents=(0.05, 0.005, 0.04))
 
@@ -69,7 +53,7 @@ def _wall_across(ee):  # the same plate turned across the path, 4 cm ahead
 
 
 def test_ray_hits_lie_where_pybullet_casts_them():
-    env = _exp1_with([_wall_beside], np.array([0.08, 0.0, 0.0]), None)
+    env = exp1_around_the_tool([_wall_beside], np.array([0.08, 0.0, 0.0]))
     try:
         env.reset(seed=0)
         hits = env.ray_hits()
@@ -95,14 +79,14 @@ def _idle(env, steps=40):
 
 
 def test_env_steps_past_a_wall_beside_the_goal_and_stops_at_one_across_the_path():
-    env = _exp1_with([_wall_beside], np.array([0.08, 0.0, 0.0]), FinalApproach())
+    env = exp1_around_the_tool([_wall_beside], np.array([0.08, 0.0, 0.0]), final_approach=FinalApproach())
     try:
         info = _idle(env)
         assert info["is_success"] and not info["collision"] and env.steps <= 17
     finally:
         env.close()
     for approach in (None, FinalApproach()):  # without it, or with the way blocked, the tool stays put
-        env = _exp1_with([_wall_across], np.array([0.08, 0.0, 0.0]), approach)
+        env = exp1_around_the_tool([_wall_across], np.array([0.08, 0.0, 0.0]), final_approach=approach)
         try:
             info = _idle(env)
             assert not info["is_success"] and not info["collision"] and info["distance"] == pytest.approx(0.08, abs=1e-3)

@@ -2,14 +2,12 @@
 
 from __future__ import annotations
 
-import dataclasses
-
 import numpy as np
 import pytest
 
+from exp1_scenes import exp1_around_the_tool
 from rayreach.env import ReachEnv
 from rayreach.safety import ACTING_SAFETY, SafetyLayer
-from rayreach.scenarios import get_scenario
 from rayreach.scenarios.schema import ObstacleSpec
 
 FAR = np.full(3, 0.4)
@@ -74,15 +72,13 @@ def test_negative_settings_are_refused():
         SafetyLayer(workspace_guard=-0.01)
 
 
+def _box_behind(ee):  # its +x face 9 cm to the -x of the tool point
+    return ObstacleSpec("box", (ee[0] - 0.14, ee[1], ee[2]), half_extents=(0.05, 0.15, 0.15))
+
+
 def _push_into_a_box(safety: SafetyLayer, steps: int = 60):
     """The UR5 at exp1's start, a box face 9 cm to the -x of the tool point, the action pushing -x."""
-    scenario = get_scenario("exp1")
-    probe = ReachEnv(robot="ur5", scenario=scenario)
-    _, info = probe.reset(seed=0)
-    probe.close()
-    x, y, z = info["ee_position"]
-    box = ObstacleSpec("box", (x - 0.14, y, z), half_extents=(0.05, 0.15, 0.15))
-    env = ReachEnv(robot="ur5", scenario=dataclasses.replace(scenario, obstacles=(box,)), safety=safety)
+    env = exp1_around_the_tool([_box_behind], safety=safety)
     try:
         env.reset(seed=0)
         for k in range(steps):

@@ -261,6 +261,7 @@ def clone_into_checkpoint(run: str | Path, kind: str, config: CloneConfig = Clon
         expert_labels: list[np.ndarray] = []
         optimiser = torch.optim.Adam(policy.parameters(), lr=config.learning_rate)
         rounds = []
+        acting = expert_env.config.final_approach
         expert_env.set_final_approach(None)  # the DAgger rounds follow the expert or the actor alone
         for r in range(config.rounds):
             follow = (lambda o: expert.label(o, expert_env)) if r == 0 else actor.act
@@ -273,7 +274,7 @@ def clone_into_checkpoint(run: str | Path, kind: str, config: CloneConfig = Clon
             loss = _fit(policy, optimiser, x, y, config.epochs, config.batch_size)
             rounds.append({"round": r + 1, "followed": "expert" if r == 0 else "cloned actor",
                            "success_rate": outcome["success"], "samples": len(y), "loss": loss})
-        expert_env.set_final_approach(FinalApproach())
+        expert_env.set_final_approach(acting)
         expert_after = _play(expert_env, actor.act, None, config.eval_episodes, config.seed + 20_000, "after",
                              progress, expert.accepts)[2]
         _, _, anchor_after = _play(anchor_env, actor.act, None, config.anchor_episodes, config.seed + 10_000,

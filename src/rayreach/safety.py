@@ -75,5 +75,5 @@ class SafetyLayer:
 
 
 ACTING_SAFETY = SafetyLayer(workspace_guard=0.01, ray_shield=0.05)
-"""The layer the executor and ``rollout`` act with: two 5 mm steps from a bound, and the
-final approach's 2 cm margin (``rayreach.policy.FinalApproach``)."""
+"""The layer the executor and ``rollout`` act with: two 5 mm steps from a bound, and a
+5 cm shield (chosen from 3, 5 and 8 cm on random worlds: docs/training.md, "Acting")."""
