@@ -96,10 +96,11 @@ def test_env_steps_past_a_wall_beside_the_goal_and_stops_at_one_across_the_path(
 
 def test_training_envs_act_with_the_layers_only_when_asked():
     for acting in (False, True):
-        env = make_env_fn(TrainConfig(robot="ur5", acting_layers=acting), 0)().unwrapped
+        env = make_env_fn(TrainConfig(robot="ur5", acting_layers=acting, shield_weight=-0.1), 0)().unwrapped
         try:
             assert (env.config.final_approach is not None) == acting
             assert env.config.safety.active == acting
+            assert env.config.rewards.shielded == -0.1
         finally:
             env.close()
 

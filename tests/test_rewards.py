@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from collections import deque
 
+import numpy as np
 import pytest
 
 from rayreach import rewards as R
@@ -71,6 +72,18 @@ def test_custom_weights_are_used():
     assert R.out_of_bounds_reward(True, w) == -4.0
     assert R.exhausted_reward(True, w) == -6.0
     assert R.shaking_reward(3, w) == -21.0
+
+
+def test_shielded_reward_is_the_removed_share_of_the_commanded_translation():
+    step = np.array([0.005, 0.0, 0.0])
+    assert R.shielded_reward(step, np.zeros(3)) == 0.0  # off in the paper's reward
+    w = R.RewardWeights(shielded=-0.1)
+    assert R.shielded_reward(step, np.zeros(3), w) == pytest.approx(-0.1)
+    assert R.shielded_reward(step, step / 2, w) == pytest.approx(-0.05)
+    assert R.shielded_reward(step, step, w) == 0.0
+    slid = R.shielded_reward(np.array([0.003, 0.004, 0.0]), np.array([0.003, 0.0, 0.0]), w)
+    assert slid == pytest.approx(-0.1 * 0.8)  # 4 of the step's 5 mm removed
+    assert R.shielded_reward(np.zeros(3), np.zeros(3), w) == 0.0
 
 
 # ---------------------------------------------------------------------- the paper's algorithm

@@ -7,6 +7,7 @@ import pytest
 
 from exp1_scenes import exp1_around_the_tool
 from rayreach.env import ReachEnv
+from rayreach.rewards import RewardWeights
 from rayreach.safety import ACTING_SAFETY, SafetyLayer
 from rayreach.scenarios.schema import ObstacleSpec
 
@@ -76,16 +77,19 @@ def _box_behind(ee):  # its +x face 9 cm to the -x of the tool point
     return ObstacleSpec("box", (ee[0] - 0.14, ee[1], ee[2]), half_extents=(0.05, 0.15, 0.15))
 
 
-def _push_into_a_box(safety: SafetyLayer, steps: int = 60):
-    """The UR5 at exp1's start, a box face 9 cm to the -x of the tool point, the action pushing -x."""
-    env = exp1_around_the_tool([_box_behind], safety=safety)
+def _push_into_a_box(safety: SafetyLayer, steps: int = 60, **env_options):
+    """The UR5 at exp1's start, a box face 9 cm to the -x of the tool point, the action pushing
+    -x; the step count and the last step's info, with the start and the shielded terms of all steps."""
+    env = exp1_around_the_tool([_box_behind], safety=safety, **env_options)
+    shielded = []
     try:
-        env.reset(seed=0)
+        _, start = env.reset(seed=0)
         for k in range(steps):
             _, _, terminated, _, info = env.step(np.array([-1, 0, 0, 0, 0, 0], np.float32))
+            shielded.append(info["reward_terms"]["shielded"])
             if terminated:
-                return k + 1, info
-        return steps, info
+                break
+        return k + 1, {**info, "start": start["ee_position"], "shielded": shielded}
     finally:
         env.close()
 
@@ -95,6 +99,19 @@ def test_shield_keeps_the_tool_off_a_box_the_policy_drives_into():
     assert info["collision"] and steps < 60  # the push alone hits the box
     steps, info = _push_into_a_box(ACTING_SAFETY)
     assert steps == 60 and not info["collision"]
+
+
+def test_shielded_term_costs_each_held_step_and_nothing_before():
+    """The tool starts 9 cm from the box; it runs free until a ray sees the box nearer than
+    the 5 cm shield (the rays start around the flange, ahead of the tool point), and every
+    step after is held whole: the term is the full weight and the tool does not move."""
+    steps, info = _push_into_a_box(ACTING_SAFETY, rewards=RewardWeights(shielded=-0.1))
+    shielded = np.array(info["shielded"])
+    assert steps == 60 and not info["collision"]
+    free = int(np.argmax(shielded < 0))
+    assert 1 <= free < 8 and np.all(shielded[:free] == 0.0)  # 8 free steps would end 4.5 cm off
+    assert shielded[free:] == pytest.approx(-0.1)
+    assert info["ee_position"][0] == pytest.approx(info["start"][0] - free * 0.005, abs=5e-4)
 
 
 def test_env_guard_holds_the_tool_inside_exp1():

@@ -88,12 +88,15 @@ def test_existing_checkpoint_needs_resume_and_bad_files_are_named(tmp_path):
         load_policy(tmp_path / "missing.zip")
 
 
-def test_resume_refuses_another_robot(tmp_path):
+def test_resume_takes_new_reward_weights_and_refuses_another_robot(tmp_path):
     out = tmp_path / "run"
     first = _run(*_train_args(out, 1024))
     assert first.returncode == 0, first.stderr[-2000:]
-    again = _run(*_train_args(out, 1024), "--resume")  # nothing left to train: still a model
+    # nothing left to train: still a model, with the weights given to this part
+    again = _run(*_train_args(out, 1024), "--resume", "--proximity-weight", "0", "--shield-weight", "-0.1")
     assert again.returncode == 0, again.stderr[-2000:]
+    meta, _ = read_bundle_meta(out / "model.zip")
+    assert (meta["config"]["proximity_weight"], meta["config"]["shield_weight"]) == (0.0, -0.1)
     other = _run("train", "--robot", "kr16", "--timesteps", "2048", "--envs", "2", "--workers", "1",
                  "--out", str(out), "--resume")
     assert other.returncode == 2 and "ur5" in other.stderr and "kr16" in other.stderr

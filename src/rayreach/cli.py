@@ -85,9 +85,11 @@ def build_parser() -> argparse.ArgumentParser:
     train.add_argument("--seed", type=int, default=0)
     train.add_argument("--checkpoint-every", type=int, default=100_000, help="steps between checkpoints")
     train.add_argument("--progress-weight", type=float, default=None,
-                       help="weight of the progress reward term (0: the paper's reward alone)")
+                       help="weight of the progress reward term (0: the paper's reward alone; kept on --resume)")
     train.add_argument("--proximity-weight", type=float, default=None,
-                       help="weight of the proximity reward term (0: the paper's reward alone)")
+                       help="weight of the proximity reward term (0: the paper's reward alone; kept on --resume)")
+    train.add_argument("--shield-weight", type=float, default=None,
+                       help="weight of the shielded reward term with --acting-layers (kept on --resume)")
     train.add_argument("--target-kl", type=float, default=None, help="early-stop updates at this KL (0: never)")
     train.add_argument("--separate-features", action="store_true", help="actor and critic get their own extractor")
     train.add_argument("--obstacles", type=int, default=None,
@@ -319,15 +321,17 @@ def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
                          checkpoint_every=args.checkpoint_every)
     if args.workers is not None:
         config = replace(config, workers=args.workers)
-    if args.progress_weight is not None:
-        config = replace(config, progress_weight=args.progress_weight)
-    if args.proximity_weight is not None:
-        config = replace(config, proximity_weight=args.proximity_weight)
     if args.target_kl is not None:
         config = replace(config, target_kl=args.target_kl or None)
     if args.separate_features:
         config = replace(config, share_features=False)
     overrides: dict = {}
+    if args.progress_weight is not None:
+        overrides["progress_weight"] = args.progress_weight
+    if args.proximity_weight is not None:
+        overrides["proximity_weight"] = args.proximity_weight
+    if args.shield_weight is not None:
+        overrides["shield_weight"] = args.shield_weight
     if args.obstacles is not None:
         overrides["obstacles"] = ObstacleParams(start=args.obstacles, minimum=args.obstacles, maximum=args.obstacles)
     if args.goal_size is not None:

@@ -29,8 +29,8 @@ A NaN or infinite action raises ``ValueError`` and changes nothing.
 success +10 when the distance is below ``goal_tolerance`` (the episode ends at the last goal;
 earlier goals of a sequence switch to the next one), collision -10 (ends), distance
 -0.01 d, leaving the workspace -10 (ends), step budget ``max_steps`` used up -5 (truncated),
-shaking -0.005 n_s; plus optional progress and proximity terms for training (weight 0 by
-default, as in the paper).
+shaking -0.005 n_s; plus optional progress, proximity and shielded terms for training
+(weight 0 by default, as in the paper).
 ``info`` carries every term (``reward_terms``), ``distance``,
 ``is_success``, ``collision``, ``out_of_bounds``, ``ee_position`` and ``goal``.
 
@@ -248,6 +248,7 @@ class ReachEnv(gym.Env):
             if straight is not None:
                 a = straight
         delta = np.clip(a, -1.0, 1.0) * self._step_scale
+        commanded = delta[:3].copy()
         cfg = self.config
         if cfg.safety.active:
             scenario = self.scenario
@@ -285,6 +286,7 @@ class ReachEnv(gym.Env):
             "exhausted": 0.0,
             "progress": R.progress_reward(self._previous_distance, distance, w),
             "proximity": R.proximity_reward(float(rays.min()), w),
+            "shielded": R.shielded_reward(commanded, delta[:3], w),
         }
         final_goal = self.goal_index == len(self.goals) - 1
         success = reached and final_goal

@@ -8,6 +8,8 @@ from __future__ import annotations
 from collections import deque
 from dataclasses import dataclass
 
+import numpy as np
+
 
 @dataclass(frozen=True)
 class RewardWeights:
@@ -30,6 +32,10 @@ class RewardWeights:
     fraction f below ``proximity_range``: a warning before a collision, for training."""
     proximity_range: float = 0.25
     """Ray fraction (of the 0.4 m range) under which the proximity term starts."""
+    shielded: float = 0.0
+    """Not in the paper (0 there): shielded * the share of the commanded translation the
+    safety layer removed. With the layer on in training a drive into an obstacle is held
+    instead of ending with r_c; this keeps a prompt cost on it."""
 
 
 def success_reward(distance: float, tolerance: float, w: RewardWeights = RewardWeights()) -> float:
@@ -62,6 +68,12 @@ def progress_reward(previous_distance: float, distance: float, w: RewardWeights 
 
 def proximity_reward(min_fraction: float, w: RewardWeights = RewardWeights()) -> float:
     return w.proximity * max(0.0, 1.0 - min_fraction / w.proximity_range)
+
+
+def shielded_reward(commanded: np.ndarray, executed: np.ndarray, w: RewardWeights = RewardWeights()) -> float:
+    """``commanded`` and ``executed`` translations (m); 0 when nothing was commanded."""
+    size = float(np.linalg.norm(commanded))
+    return w.shielded * float(np.linalg.norm(commanded - executed)) / size if size > 0 else 0.0
 
 
 def count_uneven_movements(distances: list[float] | deque[float]) -> int:

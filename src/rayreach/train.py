@@ -74,6 +74,9 @@ class TrainConfig:
     """Weight of the progress term d_{t-1} - d_t; 0 is the paper's reward alone."""
     proximity_weight: float = -0.1
     """Weight of the proximity term (rays shorter than 0.1 m); 0 is the paper's reward alone."""
+    shield_weight: float = 0.0
+    """Weight of the shielded term (share of a step's translation the safety layer removed);
+    only matters with ``acting_layers``."""
     true_goal_share: float = 0.5
     """Share of episodes played at the true goal size rho_min while the curriculum enlarges
     the goal (not in the paper; docs/training.md). They do not feed the goal-size curriculum."""
@@ -104,7 +107,8 @@ def make_env_fn(config: TrainConfig, rank: int):
             true_goal_share=config.true_goal_share,
             true_goal_tolerance=config.goal.rho_min,
             max_steps=config.max_episode_steps,
-            rewards=replace(RewardWeights(), progress=config.progress_weight, proximity=config.proximity_weight),
+            rewards=replace(RewardWeights(), progress=config.progress_weight, proximity=config.proximity_weight,
+                            shielded=config.shield_weight),
             random_world=RandomWorldConfig(n_obstacles=config.obstacles.start),
             final_approach=FinalApproach() if config.acting_layers else None,
             safety=ACTING_SAFETY if config.acting_layers else SafetyLayer(),
