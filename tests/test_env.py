@@ -229,8 +229,8 @@ def _step(env, action):
     obs, reward, terminated, truncated, info = env.step(np.asarray(action, dtype=np.float32))
     terms = info["reward_terms"]
     assert set(terms) == {"success", "collision", "distance", "shaking", "out_of_bounds", "exhausted", "progress",
-                          "proximity"}
-    assert terms["progress"] == 0.0 and terms["proximity"] == 0.0  # not in the paper: off unless weighted
+                          "proximity", "shielded"}
+    assert terms["progress"] == terms["proximity"] == terms["shielded"] == 0.0  # not in the paper: off unless weighted
     assert reward == pytest.approx(sum(terms.values()), abs=1e-12)
     assert terms["distance"] == pytest.approx(
         -0.01 * info["distance"] if not info["goal_reached"] else terms["distance"]

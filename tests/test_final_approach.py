@@ -8,7 +8,7 @@ import pybullet as p
 import pytest
 
 from exp1_scenes import exp1_around_the_tool
-from rayreach.policy import FinalApproach
+from rayreach.policy import FinalApproach, distances_to_parallelogram
 from rayreach.scenarios.schema import ObstacleSpec
 from rayreach.train import TrainConfig, make_env_fn, set_actor_trainable
 
@@ -38,14 +38,47 @@ def test_anything_a_ray_sees_within_the_margin_of_the_path_leaves_it_to_the_poli
         np.testing.assert_allclose(action, [1.0, 0, 0, 0, 0, 0], atol=1e-6)
 
 
-@pytest.mark.parametrize("field,value", [("radius", 0.0), ("margin", -0.01), ("ee_step", float("nan"))])
+def _brute_force_distances(points, u, v, n=401):
+    s, t = np.meshgrid(np.linspace(0, 1, n), np.linspace(0, 1, n))
+    area = s.reshape(-1, 1) * u + t.reshape(-1, 1) * v
+    return np.array([np.linalg.norm(area - x, axis=1).min() for x in points])
+
+
+@pytest.mark.parametrize("u,v", [
+    ((0.08, 0.0, 0.0), (0.0, 0.0, 0.13)),     # the tool upright, moving sideways
+    ((0.05, 0.03, -0.02), (0.1, -0.05, 0.1)),  # oblique
+    ((0.0, 0.0, -0.06), (0.0, 0.0, 0.13)),    # moving along the tool: a segment
+    ((0.05, 0.0, 0.0), (0.0, 0.0, 0.0)),      # no tool: the tip's path
+])
+def test_distances_to_the_swept_area_match_a_dense_sampling(u, v):
+    rng = np.random.default_rng(0)
+    points = rng.uniform(-0.15, 0.2, (40, 3))
+    u, v = np.array(u), np.array(v)
+    np.testing.assert_allclose(distances_to_parallelogram(points, u, v), _brute_force_distances(points, u, v),
+                               atol=3e-4)
+
+
+def test_the_tool_behind_the_tip_must_clear_what_the_rays_see_too():
+    """A plate edge 4.5 cm beside the tip's path but 6 cm up the (downward) tool blocks a
+    2 cm tool, and not a tip without a tool."""
+    offset, down = np.array([0.08, 0.0, 0.0]), np.array([0.0, 0.0, -1.0])
+    hits = np.array([(0.04, 0.0, 0.06), (0.3, 0.3, 0.3)])
+    assert APPROACH.action(offset, hits, down) is not None
+    tool = FinalApproach(radius=0.1, margin=0.02, ee_step=0.005, tool_length=0.13, tool_radius=0.02)
+    assert tool.action(offset, hits, down) is None
+    assert tool.action(offset, hits + [0.0, 0.045, 0.0], down) is not None  # 4.5 cm to the side: clear
+    assert tool.action(offset, hits + [0.0, 0.035, 0.0], down) is None  # 3.5 cm: under 2 + 2 cm
+
+
+@pytest.mark.parametrize("field,value", [("radius", 0.0), ("margin", -0.01), ("ee_step", float("nan")),
+                                         ("tool_length", -0.1), ("tool_radius", -0.02)])
 def test_bad_settings_are_refused_by_name(field, value):
     with pytest.raises(ValueError, match=field):
         FinalApproach(**{field: value})
 
 
-def _wall_beside(ee):  # an upright plate 3 cm to the +y of the path, 4 cm tall above and below it
-    return ObstacleSpec("box", (ee[0] + 0.04, ee[1] + 0.035, ee[2]), half_extents=(0.05, 0.005, 0.04))
+def _wall_beside(ee):  # an upright plate 5 cm to the +y of the path (3 cm from the 2 cm tool), 4 cm tall above and below it
+    return ObstacleSpec("box", (ee[0] + 0.04, ee[1] + 0.055, ee[2]), half_extents=(0.05, 0.005, 0.04))
 
 
 def _wall_across(ee):  # the same plate turned across the path, 4 cm ahead
@@ -92,6 +125,41 @@ def test_env_steps_past_a_wall_beside_the_goal_and_stops_at_one_across_the_path(
             assert not info["is_success"] and not info["collision"] and info["distance"] == pytest.approx(0.08, abs=1e-3)
         finally:
             env.close()
+
+
+def _cover_over_the_path(ee):  # a flat plate 6 cm above the tip, its edge 4 cm ahead: in the tool's way
+    return ObstacleSpec("box", (ee[0] + 0.10, ee[1], ee[2] + 0.06), half_extents=(0.06, 0.05, 0.003))
+
+
+def test_env_keeps_the_tool_body_off_a_plate_the_tips_path_passes_under():
+    env = exp1_around_the_tool([_cover_over_the_path], np.array([0.08, 0.0, 0.0]))
+    try:  # driven straight at the goal, the (downward) tool hits the plate
+        env.reset(seed=0)
+        np.testing.assert_allclose(env.ee_rot[:, 2], [0.0, 0.0, -1.0], atol=1e-6)
+        for _ in range(16):
+            _, _, terminated, _, info = env.step(np.array([1, 0, 0, 0, 0, 0], np.float32))
+            if terminated:
+                break
+        assert info["collision"]
+    finally:
+        env.close()
+    env = exp1_around_the_tool([_cover_over_the_path], np.array([0.08, 0.0, 0.0]), final_approach=FinalApproach())
+    try:
+        info = _idle(env)
+        assert not info["collision"] and info["distance"] == pytest.approx(0.08, abs=1e-3)
+    finally:
+        env.close()
+
+
+def test_env_tool_axis_is_where_pybullet_has_the_tool():
+    env = exp1_around_the_tool([_cover_over_the_path])
+    try:
+        env.reset(seed=0)
+        env.step(np.array([0.3, -0.2, 0.5, 1.0, -0.5, 0.2], np.float32))  # a turned tool
+        flange, _ = env.scene.link_pose("rayreach_tool")
+        np.testing.assert_allclose(env.ee_pos - env.spec_robot.tool.length * env.ee_rot[:, 2], flange, atol=1e-6)
+    finally:
+        env.close()
 
 
 def test_training_envs_act_with_the_layers_only_when_asked():

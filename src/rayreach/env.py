@@ -193,7 +193,14 @@ class ReachEnv(gym.Env):
     def set_final_approach(self, approach: FinalApproach | None) -> None:
         """Act with ``approach`` (None: the actions as they come) from the next step on."""
         self.config = make_config(self.config, {"final_approach": approach})
-        self._final_approach = None if approach is None else replace(approach, ee_step=self.spec_robot.ee_step)
+        tool = self.spec_robot.tool
+        self._final_approach = None if approach is None else replace(
+            approach, ee_step=self.spec_robot.ee_step, tool_length=tool.length, tool_radius=tool.radius)
+
+    @property
+    def final_approach(self) -> FinalApproach | None:
+        """The final approach as applied: ``config.final_approach`` with the robot's step and tool."""
+        return self._final_approach
 
     def set_n_obstacles(self, n: int) -> None:
         """Obstacles per random world from the next reset on (obstacle curriculum)."""
@@ -244,7 +251,8 @@ class ReachEnv(gym.Env):
         if not np.all(np.isfinite(a)):
             raise ValueError(f"action contains NaN or infinity: {a.tolist()}; the scene is unchanged")
         if self._final_approach is not None:
-            straight = self._final_approach.action(self.goals[self.goal_index] - self.ee_pos, self.ray_hits())
+            straight = self._final_approach.action(self.goals[self.goal_index] - self.ee_pos, self.ray_hits(),
+                                                   self.ee_rot[:, 2])
             if straight is not None:
                 a = straight
         delta = np.clip(a, -1.0, 1.0) * self._step_scale

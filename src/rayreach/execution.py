@@ -178,7 +178,7 @@ class Executor:
 
     def _acting(self) -> dict[str, Any]:
         """What acted between a reactive planner and the arm, for its run records."""
-        approach = self.config.final_approach
+        approach = self.env.final_approach
         return {"safety": asdict(self.config.safety),
                 "final_approach": asdict(approach) if approach is not None else None}
 

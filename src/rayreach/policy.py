@@ -134,46 +134,75 @@ def read_bundle_meta(path: str | Path) -> tuple[dict[str, Any], dict[str, np.nda
 @dataclass(frozen=True)
 class FinalApproach:
     """Step straight at the goal once the policy has brought the end effector within
-    ``radius`` and everything the rays see lies at least ``margin`` from that straight path.
+    ``radius`` and everything the rays see lies at least ``margin`` from the tool on that
+    straight path.
 
     Not in the paper. The mean action of a PPO policy trained with an enlarged goal tends to
     settle a few centimetres from the goal (the sampling noise did the last centimetres in
     training), so a deterministic rollout times out beside a goal it has reached in all but
     name (docs/training.md, "Acting"). The environment applies it
-    (``EnvConfig.final_approach``), where the rays' hit points are known. The straight path is
-    ``radius`` long at most."""
+    (``EnvConfig.final_approach``), where the rays' hit points are known, and sets the
+    robot's step and tool. The straight path is ``radius`` long at most."""
 
     radius: float = 0.1
     """The enlarged goal the curriculum trains at; the policy reliably comes this close. At
     0.15 m and more the UR5's arm, which no ray watches, met more obstacles."""
     margin: float = 0.02
-    """Least distance, m, from the straight path to anything a ray sees. Testing the path
-    rather than every ray lets the tool pass beside a wall next to the goal."""
+    """Least clearance, m, between the tool's surface on the straight path and anything a ray
+    sees. Testing the path rather than every ray lets the tool pass beside a wall next to
+    the goal."""
     ee_step: float = 0.005
-    """The robot's largest translation per action, m (the environment sets it from the spec)."""
+    """The robot's largest translation per action, m."""
+    tool_length: float = 0.0
+    """Length of the cylindrical tool behind the end effector, m (0: the tip alone)."""
+    tool_radius: float = 0.0
+    """Radius of that tool, m."""
 
     def __post_init__(self) -> None:
         for name in ("radius", "ee_step"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name} must be positive, got {getattr(self, name)}")
-        if not self.margin >= 0:
-            raise ValueError(f"margin must be >= 0, got {self.margin}")
+        for name in ("margin", "tool_length", "tool_radius"):
+            if not getattr(self, name) >= 0:
+                raise ValueError(f"{name} must be >= 0, got {getattr(self, name)}")
 
-    def action(self, goal_offset: np.ndarray, hits: np.ndarray) -> np.ndarray | None:
+    def action(self, goal_offset: np.ndarray, hits: np.ndarray,
+               tool_direction: np.ndarray | None = None) -> np.ndarray | None:
         """The straight step along ``goal_offset`` (goal minus end effector, m), or None to
         leave it to the policy. ``hits``: the points the rays see, relative to the end
-        effector, shape (n, 3)."""
+        effector, shape (n, 3). ``tool_direction``: unit vector from the flange to the tip;
+        the tool's axis sweeps a parallelogram along the path, which every hit must clear
+        by ``tool_radius + margin``."""
         goal_offset = np.asarray(goal_offset, dtype=float)
-        distance = float(np.linalg.norm(goal_offset))
-        if distance >= self.radius:
+        if float(np.linalg.norm(goal_offset)) >= self.radius:
             return None
         if len(hits):
-            along = np.clip(hits @ goal_offset / max(distance**2, 1e-12), 0.0, 1.0)
-            if np.linalg.norm(hits - along[:, None] * goal_offset, axis=1).min() < self.margin:
+            back = np.zeros(3) if tool_direction is None else -self.tool_length * np.asarray(tool_direction, float)
+            if distances_to_parallelogram(np.asarray(hits, float), goal_offset, back).min() < self.tool_radius + self.margin:
                 return None
         action = np.zeros(6, dtype=np.float32)
         action[:3] = np.clip(goal_offset / self.ee_step, -1.0, 1.0)
         return action
+
+
+def distances_to_parallelogram(points: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Distance of each point (n, 3) to the parallelogram {s u + t v : s, t in [0, 1]}; a
+    zero or degenerate side makes it a segment or a point."""
+    def to_segment(a: np.ndarray, d: np.ndarray) -> np.ndarray:
+        rel = points - a
+        t = np.clip((rel @ d) / (d @ d), 0.0, 1.0) if d @ d > 0 else np.zeros(len(points))
+        return np.linalg.norm(rel - t[:, None] * d, axis=1)
+
+    zero = np.zeros(3)
+    best = np.minimum.reduce([to_segment(zero, u), to_segment(v, u), to_segment(zero, v), to_segment(u, v)])
+    gram = np.array([[u @ u, u @ v], [u @ v, v @ v]])
+    if np.linalg.det(gram) > 1e-12 * max(gram[0, 0] * gram[1, 1], 1e-30):
+        st = np.linalg.solve(gram, np.stack([points @ u, points @ v]))
+        inside = np.all((st >= 0.0) & (st <= 1.0), axis=0)
+        if inside.any():
+            foot = st[0, inside, None] * u + st[1, inside, None] * v
+            best[inside] = np.linalg.norm(points[inside] - foot, axis=1)
+    return best
 
 
 @dataclass
