@@ -26,7 +26,7 @@ def test_steps_straight_only_within_the_radius():
     ((0.04, 0.03, 0.0), True),     # a wall 3 cm beside the path: the tool passes it
     ((0.04, 0.01, 0.0), False),    # 1 cm beside the path
     ((0.09, 0.0, 0.015), False),   # 1.8 cm from the goal, beyond it
-    ((-0.015, 0.0, 0.0), False),   # 1.5 cm behind the tool
+    ((-0.015, 0.0, 0.0), True),    # 1.5 cm behind the tool: the path leads away from it
     ((0.12, 0.0, 0.0), True),      # 4 cm past the goal
     ((0.04, -0.2, 0.0), True),     # far to the side
 ])
@@ -68,6 +68,17 @@ def test_the_tool_behind_the_tip_must_clear_what_the_rays_see_too():
     assert tool.action(offset, hits, down) is None
     assert tool.action(offset, hits + [0.0, 0.045, 0.0], down) is not None  # 4.5 cm to the side: clear
     assert tool.action(offset, hits + [0.0, 0.035, 0.0], down) is None  # 3.5 cm: under 2 + 2 cm
+
+
+def test_what_the_tool_is_already_near_blocks_only_a_path_that_comes_nearer():
+    """A wall along the (downward) tool, 2.5 cm from its axis (under its 2 cm radius plus
+    1 cm): a path along the wall passes, one towards it does not."""
+    tool = FinalApproach(radius=0.1, margin=0.01, ee_step=0.005, tool_length=0.13, tool_radius=0.02)
+    down = np.array([0.0, 0.0, -1.0])
+    wall = np.array([(x, 0.025, z) for x in (-0.05, 0.0, 0.05, 0.1) for z in (0.0, 0.05, 0.1)])
+    assert tool.action(np.array([0.08, 0.0, 0.0]), wall, down) is not None
+    assert tool.action(np.array([0.06, 0.0, -0.04]), wall, down) is not None  # down and along
+    assert tool.action(np.array([0.06, 0.004, 0.0]), wall, down) is None  # 4 mm nearer
 
 
 @pytest.mark.parametrize("field,value", [("radius", 0.0), ("margin", -0.01), ("ee_step", float("nan")),

@@ -15,7 +15,7 @@ import tempfile
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -144,10 +144,14 @@ class FinalApproach:
     (``EnvConfig.final_approach``), where the rays' hit points are known, and sets the
     robot's step and tool. The straight path is ``radius`` long at most."""
 
+    NEARER: ClassVar[float] = 0.001
+    """How much nearer, m, the path may bring the tool to the nearest hit once it is within
+    the margin already (rounding, not a distance that matters)."""
+
     radius: float = 0.1
     """The enlarged goal the curriculum trains at; the policy reliably comes this close. At
     0.15 m and more the UR5's arm, which no ray watches, met more obstacles."""
-    margin: float = 0.02
+    margin: float = 0.01
     """Least clearance, m, between the tool's surface on the straight path and anything a ray
     sees. Testing the path rather than every ray lets the tool pass beside a wall next to
     the goal."""
@@ -172,13 +176,17 @@ class FinalApproach:
         leave it to the policy. ``hits``: the points the rays see, relative to the end
         effector, shape (n, 3). ``tool_direction``: unit vector from the flange to the tip;
         the tool's axis sweeps a parallelogram along the path, which every hit must clear
-        by ``tool_radius + margin``."""
+        by ``tool_radius + margin``, unless the tool is that near a hit already and the path
+        brings it no nearer to any (a wall it slides along, a compartment it reaches into)."""
         goal_offset = np.asarray(goal_offset, dtype=float)
         if float(np.linalg.norm(goal_offset)) >= self.radius:
             return None
         if len(hits):
+            hits = np.asarray(hits, dtype=float)
             back = np.zeros(3) if tool_direction is None else -self.tool_length * np.asarray(tool_direction, float)
-            if distances_to_parallelogram(np.asarray(hits, float), goal_offset, back).min() < self.tool_radius + self.margin:
+            on_path = distances_to_parallelogram(hits, goal_offset, back).min()
+            now = distances_to_parallelogram(hits, np.zeros(3), back).min()
+            if on_path < self.tool_radius + self.margin and on_path < now - self.NEARER:
                 return None
         action = np.zeros(6, dtype=np.float32)
         action[:3] = np.clip(goal_offset / self.ee_step, -1.0, 1.0)
