@@ -59,8 +59,9 @@ def test_distances_to_the_swept_area_match_a_dense_sampling(u, v):
 
 
 def test_the_tool_behind_the_tip_must_clear_what_the_rays_see_too():
-    """A plate edge 4.5 cm beside the tip's path but 6 cm up the (downward) tool blocks a
-    2 cm tool, and not a tip without a tool."""
+    """A plate edge 6 cm above the tip's path, 4 cm ahead, blocks a downward 13 cm tool of
+    2 cm radius and not a tip without a tool; moved 4.5 cm to the side it is clear of the
+    tool too, at 3.5 cm it is not."""
     offset, down = np.array([0.08, 0.0, 0.0]), np.array([0.0, 0.0, -1.0])
     hits = np.array([(0.04, 0.0, 0.06), (0.3, 0.3, 0.3)])
     assert APPROACH.action(offset, hits, down) is not None

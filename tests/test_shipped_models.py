@@ -12,6 +12,7 @@ import pytest
 from rayreach.execution import Executor
 from rayreach.planners import make_planner
 from rayreach.planners.drl import MODELS_DIR
+from rayreach.policy import FinalApproach
 from rayreach.robots import get_robot
 
 CASES = [("ur5", "exp1"), ("kr16", "exp4")]
@@ -37,7 +38,7 @@ def test_shipped_policy_loads_with_metadata_and_runs_an_episode(robot, scenario)
     assert 0 < record.steps <= 1024 and record.config["timesteps"] == meta["timesteps"]
     assert record.config["safety"] == {"workspace_guard": 0.01, "ray_shield": 0.05}  # the executor's defaults
     tool = get_robot(robot).tool  # the env fills in the robot's step and tool
-    assert record.config["final_approach"] == {"radius": 0.1, "margin": 0.02, "ee_step": 0.005,
+    assert record.config["final_approach"] == {"radius": 0.1, "margin": FinalApproach.margin, "ee_step": 0.005,
                                                "tool_length": tool.length, "tool_radius": tool.radius}
     assert np.isfinite(record.ee_path).all()
 

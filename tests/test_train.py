@@ -97,6 +97,7 @@ def test_resume_takes_new_reward_weights_and_refuses_another_robot(tmp_path):
     assert again.returncode == 0, again.stderr[-2000:]
     meta, _ = read_bundle_meta(out / "model.zip")
     assert (meta["config"]["proximity_weight"], meta["config"]["shield_weight"]) == (0.0, -0.1)
+    assert meta["config"]["progress_weight"] == 10.0  # not given: the saved one
     other = _run("train", "--robot", "kr16", "--timesteps", "2048", "--envs", "2", "--workers", "1",
                  "--out", str(out), "--resume")
     assert other.returncode == 2 and "ur5" in other.stderr and "kr16" in other.stderr

@@ -85,11 +85,11 @@ def build_parser() -> argparse.ArgumentParser:
     train.add_argument("--seed", type=int, default=0)
     train.add_argument("--checkpoint-every", type=int, default=100_000, help="steps between checkpoints")
     train.add_argument("--progress-weight", type=float, default=None,
-                       help="weight of the progress reward term (0: the paper's reward alone; kept on --resume)")
+                       help="weight of the progress reward term (0: the paper's reward alone; also changes a resumed run)")
     train.add_argument("--proximity-weight", type=float, default=None,
-                       help="weight of the proximity reward term (0: the paper's reward alone; kept on --resume)")
+                       help="weight of the proximity reward term (0: the paper's reward alone; also changes a resumed run)")
     train.add_argument("--shield-weight", type=float, default=None,
-                       help="weight of the shielded reward term with --acting-layers (kept on --resume)")
+                       help="weight of the shielded reward term with --acting-layers (also changes a resumed run)")
     train.add_argument("--target-kl", type=float, default=None, help="early-stop updates at this KL (0: never)")
     train.add_argument("--separate-features", action="store_true", help="actor and critic get their own extractor")
     train.add_argument("--obstacles", type=int, default=None,

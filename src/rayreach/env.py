@@ -88,7 +88,8 @@ class EnvConfig:
     (the damping shrinks for small errors); an unconverged step still moves (``info["ik_converged"]``)."""
     safety: SafetyLayer = SafetyLayer()
     """Not in the paper: what the controller does to an action before the arm moves; off in
-    training, ``rayreach.safety.ACTING_SAFETY`` in the executor and ``rollout``."""
+    training (unless ``TrainConfig.acting_layers``), ``rayreach.safety.ACTING_SAFETY`` in
+    the executor and ``rollout``."""
     final_approach: FinalApproach | None = None
     """Not in the paper: replace the action by the straight step at the goal when
     ``rayreach.policy.FinalApproach`` says so; on in the executor and ``rollout``, off in
@@ -250,13 +251,14 @@ class ReachEnv(gym.Env):
             raise ValueError(f"action must have 6 values (dx, dy, dz, droll, dpitch, dyaw), got shape {np.shape(action)}")
         if not np.all(np.isfinite(a)):
             raise ValueError(f"action contains NaN or infinity: {a.tolist()}; the scene is unchanged")
+        straight = None
         if self._final_approach is not None:
             straight = self._final_approach.action(self.goals[self.goal_index] - self.ee_pos, self.ray_hits(),
                                                    self.ee_rot[:, 2])
             if straight is not None:
                 a = straight
         delta = np.clip(a, -1.0, 1.0) * self._step_scale
-        commanded = delta[:3].copy()
+        commanded = delta[:3].copy()  # what the policy asked for; the straight step is not its choice
         cfg = self.config
         if cfg.safety.active:
             scenario = self.scenario
@@ -294,7 +296,7 @@ class ReachEnv(gym.Env):
             "exhausted": 0.0,
             "progress": R.progress_reward(self._previous_distance, distance, w),
             "proximity": R.proximity_reward(float(rays.min()), w),
-            "shielded": R.shielded_reward(commanded, delta[:3], w),
+            "shielded": R.shielded_reward(commanded, delta[:3], w) if straight is None else 0.0,
         }
         final_goal = self.goal_index == len(self.goals) - 1
         success = reached and final_goal

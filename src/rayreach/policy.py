@@ -145,8 +145,8 @@ class FinalApproach:
     robot's step and tool. The straight path is ``radius`` long at most."""
 
     NEARER: ClassVar[float] = 0.001
-    """How much nearer, m, the path may bring the tool to the nearest hit once it is within
-    the margin already (rounding, not a distance that matters)."""
+    """How much nearer, m, the path may bring the tool to what it sees than the nearest hit
+    is now, once that is within the margin (rounding, not a distance that matters)."""
 
     radius: float = 0.1
     """The enlarged goal the curriculum trains at; the policy reliably comes this close. At
@@ -174,10 +174,13 @@ class FinalApproach:
                tool_direction: np.ndarray | None = None) -> np.ndarray | None:
         """The straight step along ``goal_offset`` (goal minus end effector, m), or None to
         leave it to the policy. ``hits``: the points the rays see, relative to the end
-        effector, shape (n, 3). ``tool_direction``: unit vector from the flange to the tip;
-        the tool's axis sweeps a parallelogram along the path, which every hit must clear
-        by ``tool_radius + margin``, unless the tool is that near a hit already and the path
-        brings it no nearer to any (a wall it slides along, a compartment it reaches into)."""
+        effector, shape (n, 3). ``tool_direction``: unit vector from the flange to the tip
+        (None: the tip alone, with ``tool_radius`` around it); the tool's axis sweeps a
+        parallelogram along the path, which every hit must clear by ``tool_radius + margin``,
+        unless one hit is that near already and the path brings the tool no nearer to any
+        hit than to that one now (a wall it slides along, a compartment it reaches into).
+        A hit within ``NEARER`` of the tool (contact) therefore no longer blocks the path;
+        the safety layer's ray shield still does."""
         goal_offset = np.asarray(goal_offset, dtype=float)
         if float(np.linalg.norm(goal_offset)) >= self.radius:
             return None

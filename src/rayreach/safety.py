@@ -1,4 +1,5 @@
-"""A safety layer between a policy's action and the arm: not in the paper, off in training.
+"""A safety layer between a policy's action and the arm: not in the paper, off in training
+(unless ``rayreach train --acting-layers``).
 
 A trained policy still drives into what its rays see and out of the workspace now and then
 (docs/training.md, "Acting"). A cell's controller would not let it: a safety zone holds the
