@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from rayreach.env import ReachEnv
 from rayreach.execution import Executor
 from rayreach.planners import make_planner
 from rayreach.planners.drl import MODELS_DIR
@@ -72,3 +73,27 @@ def test_shipped_kr16_policy_reaches_exp4_at_the_true_goal_size():
 def test_a_drl_model_for_the_other_robot_is_refused():
     with pytest.raises(ValueError, match="is a ur5 policy, not kr16"):
         make_planner("drl", "kr16", model=MODELS_DIR / "ur5.zip")
+
+
+def test_drl_alone_runs_the_policy_without_the_acting_layers_and_restores_them():
+    """``drl-alone`` in the executor gives the episode of a bare env stepped by the same
+    policy, and the executor's next ``drl`` run has its layers back."""
+    alone = make_planner("drl-alone", "ur5")
+    with Executor("exp1") as ex:
+        record = ex.run(alone, seed=0)
+        again = ex.run(make_planner("drl", "ur5"), seed=0)
+    assert record.planner == "drl-alone" and record.config["final_approach"] is None
+    assert record.config["safety"] == {"workspace_guard": 0.0, "ray_shield": 0.0}
+    env = ReachEnv(robot="ur5", scenario="exp1")  # no final approach, no safety layer
+    try:
+        obs, info = env.reset(seed=0)
+        path, done = [info["ee_position"]], False
+        while not done:
+            obs, _, terminated, truncated, info = env.step(alone.act(obs))
+            path.append(info["ee_position"])
+            done = terminated or truncated
+    finally:
+        env.close()
+    np.testing.assert_allclose(record.ee_path, np.asarray(path), atol=1e-9)
+    assert again.config == _shipped_run("ur5", "exp1")[1].config
+    np.testing.assert_allclose(again.ee_path, _shipped_run("ur5", "exp1")[1].ee_path, atol=1e-9)

@@ -59,7 +59,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     ev = sub.add_parser("evaluate", help="the paper's experiments: every planner, N runs, results.db, table, plots")
     ev.add_argument("--experiments", default="1-7", help="e.g. 1-7, 1,3, exp4, random-ur5")
-    ev.add_argument("--planners", default=EVAL_PLANNERS, help="comma-separated (--suite random: drl)")
+    ev.add_argument("--planners", default=EVAL_PLANNERS, help="comma-separated, of: drl, drl-alone (the policy without final approach and safety layer), rrt, birrt, ncrrt, ompl-rrt, ompl-rrtconnect (--suite random: drl)")
     ev.add_argument("--runs", type=int, default=30, help="runs per experiment and planner")
     ev.add_argument("--suite", choices=["random"], default=None,
                     help="held-out random worlds instead of --experiments (seeds disjoint from training)")

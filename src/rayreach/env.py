@@ -198,6 +198,10 @@ class ReachEnv(gym.Env):
         self._final_approach = None if approach is None else replace(
             approach, ee_step=self.spec_robot.ee_step, tool_length=tool.length, tool_radius=tool.radius)
 
+    def set_safety(self, layer: SafetyLayer) -> None:
+        """Pass each action through ``layer`` (``SafetyLayer()``: off) from the next step on."""
+        self.config = make_config(self.config, {"safety": layer})
+
     @property
     def final_approach(self) -> FinalApproach | None:
         """The final approach as applied: ``config.final_approach`` with the robot's step and tool."""

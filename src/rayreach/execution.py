@@ -13,9 +13,10 @@ from __future__ import annotations
 
 import math
 import time
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Iterator
 
 import numpy as np
 
@@ -179,8 +180,23 @@ class Executor:
     def _acting(self) -> dict[str, Any]:
         """What acted between a reactive planner and the arm, for its run records."""
         approach = self.env.final_approach
-        return {"safety": asdict(self.config.safety),
+        return {"safety": asdict(self.env.config.safety),
                 "final_approach": asdict(approach) if approach is not None else None}
+
+    @contextmanager
+    def _layers(self, on: bool) -> Iterator[None]:
+        """The final approach and safety layer of ``config`` on, or off for this run."""
+        if on:
+            yield
+            return
+        env = self.env
+        env.set_final_approach(None)
+        env.set_safety(SafetyLayer())
+        try:
+            yield
+        finally:
+            env.set_final_approach(self.config.final_approach)
+            env.set_safety(self.config.safety)
 
     def _record(self, planner, seed: int, **values: Any) -> RunRecord:
         values.setdefault("config", planner.config())
@@ -189,6 +205,10 @@ class Executor:
                          seed=seed, **values)
 
     def _run_reactive(self, planner: ReactivePlanner, seed: int) -> RunRecord:
+        with self._layers(planner.acting_layers):
+            return self._run_reactive_steps(planner, seed)
+
+    def _run_reactive_steps(self, planner: ReactivePlanner, seed: int) -> RunRecord:
         env = self.env
         obs, info = env.reset(seed=seed)
         ee, joints = [info["ee_position"]], [env.q.copy()]

@@ -16,18 +16,19 @@ from rayreach.planners.result import PlanResult, Status
 from rayreach.planners.rrt import RRTConfig, birrt, rrt
 from rayreach.planners.smoothing import ShortcutConfig
 
-PLANNER_NAMES = ("drl", "rrt", "birrt", "ncrrt", "ompl-rrt", "ompl-rrtconnect")
-SAMPLING_PLANNERS = PLANNER_NAMES[1:]
+SAMPLING_PLANNERS = ("rrt", "birrt", "ncrrt", "ompl-rrt", "ompl-rrtconnect")
+PLANNER_NAMES = ("drl", "drl-alone", *SAMPLING_PLANNERS)
+"""``drl-alone``: the DRL planner without the executor's final approach and safety layer."""
 
 
 def make_planner(name: str, robot: str, *, model: str | Path | None = None, time_limit: float | None = None,
                  smooth: bool = False) -> GlobalPlanner | ReactivePlanner:
     """Planner ``name`` for ``robot`` with its defaults; ``time_limit`` (s) for sampling
     planners, ``model`` for the DRL planner (default: the shipped policy)."""
-    if name == "drl":
+    if name in ("drl", "drl-alone"):
         from rayreach.planners.drl import DRLPlanner, shipped_model
 
-        planner = DRLPlanner(model if model is not None else shipped_model(robot))
+        planner = DRLPlanner(model if model is not None else shipped_model(robot), acting_layers=name == "drl")
         if planner.robot != robot:
             raise ValueError(f"model {model} is a {planner.robot} policy, not {robot}")
         return planner

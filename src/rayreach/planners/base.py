@@ -33,6 +33,9 @@ class GlobalPlanner(ABC):
 
 class ReactivePlanner(ABC):
     name: str
+    acting_layers: bool = True
+    """False: the executor runs the actions as they come, without its final approach and
+    safety layer (``ExecutionConfig``), as the paper's agent acted."""
 
     @abstractmethod
     def act(self, observation: np.ndarray) -> np.ndarray:

@@ -28,11 +28,14 @@ def shipped_model(robot: str) -> Path:
 
 
 class DRLPlanner(ReactivePlanner):
-    name = "drl"
+    """The trained policy; ``acting_layers=False`` (planner ``drl-alone``) runs it without the
+    executor's final approach and safety layer, to measure the policy itself."""
 
-    def __init__(self, model: str | Path, deterministic: bool = True) -> None:
+    def __init__(self, model: str | Path, deterministic: bool = True, acting_layers: bool = True) -> None:
         self.policy = load_policy(model)
         self.deterministic = deterministic
+        self.acting_layers = acting_layers
+        self.name = "drl" if acting_layers else "drl-alone"
 
     @property
     def robot(self) -> str:
