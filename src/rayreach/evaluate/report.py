@@ -124,7 +124,8 @@ def _colours(planners: list[str]) -> dict[str, Any]:
 
 def bar_chart(rows: list[dict[str, Any]], path: Path) -> Path:
     """Path length and execution time per experiment and planner (mean ± std, successes only);
-    the execution-time axis is logarithmic, as the planners differ by orders of magnitude."""
+    the execution-time axis is logarithmic, as the planners differ by orders of magnitude. A
+    planner without a successful run in an experiment gets a cross at the axis, not a bar."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -139,14 +140,16 @@ def bar_chart(rows: list[dict[str, Any]], path: Path) -> Path:
     for ax, metric in zip(axes, ("path_length", "execution_time")):
         for i, p in enumerate(planners):
             values = [stats.get((e, p), {}).get(metric) for e in experiments]
-            means = [v[0] if v else 0.0 for v in values]
-            stds = [v[1] if v else 0.0 for v in values]
-            ax.bar(x + (i - (len(planners) - 1) / 2) * width, means, width, yerr=stds, label=p,
-                   color=colours[p], capsize=2)
+            means = [v[0] if v else np.nan for v in values]
+            stds = [v[1] if v else np.nan for v in values]
+            at = x + (i - (len(planners) - 1) / 2) * width
+            ax.bar(at, means, width, yerr=stds, label=p, color=colours[p], capsize=2)
+            none = [k for k, v in enumerate(values) if not v]
+            ax.plot(at[none], np.full(len(none), 0.02), "x", color=colours[p], transform=ax.get_xaxis_transform())
         title, unit = METRICS[metric]
         ax.set_xticks(x, experiments)
         ax.set_ylabel(f"{title} [{unit}]")
-        ax.set_title(f"{title} (mean ± std of successful runs)")
+        ax.set_title(f"{title} (mean ± std of successful runs; ×: none)")
         if metric == "execution_time":
             ax.set_yscale("log")
         ax.grid(axis="y", alpha=0.3)
