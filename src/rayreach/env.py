@@ -262,13 +262,17 @@ class ReachEnv(gym.Env):
             if straight is not None:
                 a = straight
         delta = np.clip(a, -1.0, 1.0) * self._step_scale
-        commanded = delta[:3].copy()  # what the policy asked for; the straight step is not its choice
         cfg = self.config
+        w = cfg.rewards
+        shielded = 0.0
         if cfg.safety.active:
             scenario = self.scenario
+            commanded = delta[:3]
             delta = cfg.safety.filter(delta, self.ee_pos, np.asarray(scenario.workspace_low),  # type: ignore[union-attr]
                                       np.asarray(scenario.workspace_high),  # type: ignore[union-attr]
                                       self._ray_fractions * cfg.ray_range, self._ray_directions)
+            if straight is None:  # the straight step is not the policy's choice
+                shielded = R.shielded_reward(commanded, delta[:3], w)
 
         target_pos = self.ee_pos + delta[:3]
         target_rot = rotvec_to_matrix(delta[3:]) @ self.ee_rot
@@ -290,7 +294,6 @@ class ReachEnv(gym.Env):
         reached = distance < self.tolerance
         n_shakes = self._shake.update(distance)
         rays = self._cast_rays()
-        w = cfg.rewards
         terms = {
             "success": R.success_reward(distance, self.tolerance, w),
             "collision": R.collision_reward(collided, w),
@@ -300,7 +303,7 @@ class ReachEnv(gym.Env):
             "exhausted": 0.0,
             "progress": R.progress_reward(self._previous_distance, distance, w),
             "proximity": R.proximity_reward(float(rays.min()), w),
-            "shielded": R.shielded_reward(commanded, delta[:3], w) if straight is None else 0.0,
+            "shielded": shielded,
         }
         final_goal = self.goal_index == len(self.goals) - 1
         success = reached and final_goal

@@ -188,24 +188,27 @@ class FinalApproach:
             hits = np.asarray(hits, dtype=float)
             back = np.zeros(3) if tool_direction is None else -self.tool_length * np.asarray(tool_direction, float)
             on_path = distances_to_parallelogram(hits, goal_offset, back).min()
-            now = distances_to_parallelogram(hits, np.zeros(3), back).min()
-            if on_path < self.tool_radius + self.margin and on_path < now - self.NEARER:
-                return None
+            if on_path < self.tool_radius + self.margin:
+                now = distances_to_segment(hits, np.zeros(3), back).min()  # the tool where it is
+                if on_path < now - self.NEARER:
+                    return None
         action = np.zeros(6, dtype=np.float32)
         action[:3] = np.clip(goal_offset / self.ee_step, -1.0, 1.0)
         return action
 
 
+def distances_to_segment(points: np.ndarray, a: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """Distance of each point (n, 3) to the segment from ``a`` to ``a + d`` (a point if d = 0)."""
+    rel = points - a
+    t = np.clip((rel @ d) / (d @ d), 0.0, 1.0) if d @ d > 0 else np.zeros(len(points))
+    return np.linalg.norm(rel - t[:, None] * d, axis=1)
+
+
 def distances_to_parallelogram(points: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
     """Distance of each point (n, 3) to the parallelogram {s u + t v : s, t in [0, 1]}; a
     zero or degenerate side makes it a segment or a point."""
-    def to_segment(a: np.ndarray, d: np.ndarray) -> np.ndarray:
-        rel = points - a
-        t = np.clip((rel @ d) / (d @ d), 0.0, 1.0) if d @ d > 0 else np.zeros(len(points))
-        return np.linalg.norm(rel - t[:, None] * d, axis=1)
-
     zero = np.zeros(3)
-    best = np.minimum.reduce([to_segment(zero, u), to_segment(v, u), to_segment(zero, v), to_segment(u, v)])
+    best = np.minimum.reduce([distances_to_segment(points, a, d) for a, d in ((zero, u), (v, u), (zero, v), (u, v))])
     gram = np.array([[u @ u, u @ v], [u @ v, v @ v]])
     if np.linalg.det(gram) > 1e-12 * max(gram[0, 0] * gram[1, 1], 1e-30):
         st = np.linalg.solve(gram, np.stack([points @ u, points @ v]))
