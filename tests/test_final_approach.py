@@ -8,7 +8,9 @@ import pybullet as p
 import pytest
 
 from exp1_scenes import exp1_around_the_tool
+from rayreach.env import ReachEnv
 from rayreach.policy import FinalApproach, distances_to_parallelogram
+from rayreach.robots import get_robot
 from rayreach.scenarios.schema import ObstacleSpec
 from rayreach.train import TrainConfig, make_env_fn, set_actor_trainable
 
@@ -135,6 +137,29 @@ def test_env_steps_past_a_wall_beside_the_goal_and_stops_at_one_across_the_path(
         try:
             info = _idle(env)
             assert not info["is_success"] and not info["collision"] and info["distance"] == pytest.approx(0.08, abs=1e-3)
+        finally:
+            env.close()
+
+
+def test_the_env_fills_in_the_robots_radius_unless_one_is_given():
+    for robot, radius in (("ur5", 0.1), ("kr16", 0.2)):
+        env = ReachEnv(robot=robot, scenario="random", final_approach=FinalApproach())
+        try:
+            assert env.final_approach.radius == get_robot(robot).final_approach_radius == radius
+            env.set_final_approach(FinalApproach(radius=0.15))
+            assert env.final_approach.radius == 0.15
+        finally:
+            env.close()
+    with pytest.raises(ValueError, match="radius"):
+        FinalApproach().action(np.array([0.03, 0.0, 0.0]), NOTHING)
+
+
+def test_env_steps_straight_from_farther_with_a_larger_radius():
+    for radius, reached in ((None, False), (0.15, True)):  # the UR5's own radius is 0.1 m
+        env = exp1_around_the_tool([], np.array([0.13, 0.0, 0.0]), final_approach=FinalApproach(radius))
+        try:
+            info = _idle(env)
+            assert info["is_success"] == reached and not info["collision"]
         finally:
             env.close()
 

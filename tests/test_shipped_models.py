@@ -38,9 +38,10 @@ def test_shipped_policy_loads_with_metadata_and_runs_an_episode(robot, scenario)
     assert record.outcome in {"success", "collision", "timeout", "out of bounds"}
     assert 0 < record.steps <= 1024 and record.config["timesteps"] == meta["timesteps"]
     assert record.config["safety"] == {"workspace_guard": 0.01, "ray_shield": 0.05}  # the executor's defaults
-    tool = get_robot(robot).tool  # the env fills in the robot's step and tool
-    assert record.config["final_approach"] == {"radius": 0.1, "margin": FinalApproach.margin, "ee_step": 0.005,
-                                               "tool_length": tool.length, "tool_radius": tool.radius}
+    spec = get_robot(robot)  # the env fills in the robot's radius, step and tool
+    assert record.config["final_approach"] == {"radius": spec.final_approach_radius, "margin": FinalApproach.margin,
+                                               "ee_step": 0.005, "tool_length": spec.tool.length,
+                                               "tool_radius": spec.tool.radius}
     assert np.isfinite(record.ee_path).all()
 
 

@@ -111,7 +111,10 @@ def build_parser() -> argparse.ArgumentParser:
     roll.add_argument("--tolerance", type=float, default=0.01, help="goal tolerance, m (paper: 0.01)")
     roll.add_argument("--obstacles", type=int, default=None, help="obstacles per random world")
     roll.add_argument("--no-final-approach", action="store_true",
-                      help="without the straight final approach inside 10 cm of the goal")
+                      help="without the straight final approach near the goal (rayreach.policy.FinalApproach)")
+    roll.add_argument("--final-approach-radius", type=float, default=None,
+                      help="distance to the goal within which the final approach may act, m (default: the robot's, "
+                           "UR5 0.1, KR16 0.2)")
     roll.add_argument("--workspace-guard", type=float, default=ACTING_SAFETY.workspace_guard,
                       help="hold the tool this far inside the workspace, m (0: off; rayreach.safety)")
     roll.add_argument("--ray-shield", type=float, default=ACTING_SAFETY.ray_shield,
@@ -356,7 +359,8 @@ def _rollout(args: argparse.Namespace, scenario: str) -> int:
     safety = SafetyLayer(args.workspace_guard, args.ray_shield)
     summary = rollout(args.model, scenario, episodes=args.episodes, deterministic=not args.stochastic,
                       goal_tolerance=args.tolerance, n_obstacles=args.obstacles, progress=not args.json,
-                      final_approach=None if args.no_final_approach else FinalApproach(), safety=safety,
+                      final_approach=None if args.no_final_approach else FinalApproach(args.final_approach_radius),
+                      safety=safety,
                       seed=EVAL_SEED_OFFSET if args.seed is None else args.seed)
     if args.json:
         print(json.dumps({"scenario": scenario, **summary.to_dict()}))

@@ -196,7 +196,8 @@ class ReachEnv(gym.Env):
         self.config = make_config(self.config, {"final_approach": approach})
         tool = self.spec_robot.tool
         self._final_approach = None if approach is None else replace(
-            approach, ee_step=self.spec_robot.ee_step, tool_length=tool.length, tool_radius=tool.radius)
+            approach, ee_step=self.spec_robot.ee_step, tool_length=tool.length, tool_radius=tool.radius,
+            radius=self.spec_robot.final_approach_radius if approach.radius is None else approach.radius)
 
     def set_safety(self, layer: SafetyLayer) -> None:
         """Pass each action through ``layer`` (``SafetyLayer()``: off) from the next step on."""
@@ -204,7 +205,8 @@ class ReachEnv(gym.Env):
 
     @property
     def final_approach(self) -> FinalApproach | None:
-        """The final approach as applied: ``config.final_approach`` with the robot's step and tool."""
+        """The final approach as applied: ``config.final_approach`` with the robot's step and tool,
+        and its radius unless the config gives one."""
         return self._final_approach
 
     def set_n_obstacles(self, n: int) -> None:

@@ -142,15 +142,17 @@ class FinalApproach:
     training), so a deterministic rollout times out beside a goal it has reached in all but
     name (docs/training.md, "Acting"). The environment applies it
     (``EnvConfig.final_approach``), where the rays' hit points are known, and sets the
-    robot's step and tool. The straight path is ``radius`` long at most."""
+    robot's step and tool (and radius, unless one is given). The straight path is ``radius`` long at most."""
 
     NEARER: ClassVar[float] = 0.001
     """How much nearer, m, the path may bring the tool to what it sees than the nearest hit
     is now, once that is within the margin (rounding, not a distance that matters)."""
 
-    radius: float = 0.1
-    """The enlarged goal the curriculum trains at; the policy reliably comes this close. At
-    0.15 m and more the UR5's arm, which no ray watches, met more obstacles."""
+    radius: float | None = None
+    """None: the robot's (``RobotSpec.final_approach_radius``), which the environment fills
+    in. The UR5's is the enlarged goal the curriculum trains at (0.1 m), which the policy
+    reliably comes this close to; at 0.15 m and more its arm, which no ray watches, met more
+    obstacles. The KR16's arm stays farther behind its tool."""
     margin: float = 0.01
     """Least clearance, m, between the tool's surface on the straight path and anything a ray
     sees. Testing the path rather than every ray lets the tool pass beside a wall next to
@@ -164,7 +166,7 @@ class FinalApproach:
 
     def __post_init__(self) -> None:
         for name in ("radius", "ee_step"):
-            if not getattr(self, name) > 0:
+            if getattr(self, name) is not None and not getattr(self, name) > 0:
                 raise ValueError(f"{name} must be positive, got {getattr(self, name)}")
         for name in ("margin", "tool_length", "tool_radius"):
             if not getattr(self, name) >= 0:
@@ -181,6 +183,8 @@ class FinalApproach:
         hit than to that one now (a wall it slides along, a compartment it reaches into).
         A hit within ``NEARER`` of the tool (contact) therefore no longer blocks the path;
         the safety layer's ray shield still does."""
+        if self.radius is None:
+            raise ValueError("FinalApproach.radius is None: give one, or let ReachEnv fill in the robot's")
         goal_offset = np.asarray(goal_offset, dtype=float)
         if float(np.linalg.norm(goal_offset)) >= self.radius:
             return None

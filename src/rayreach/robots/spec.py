@@ -94,6 +94,10 @@ class RobotSpec:
     """Largest end-effector translation per action, m (paper: 0.005 for both robots)."""
     rot_step: float = 0.005
     """Largest end-effector rotation per action, rad."""
+    final_approach_radius: float = 0.1
+    """Distance to the goal, m, within which the final approach may step straight at it
+    (``policy.FinalApproach``); the longer the straight path, the more the arm, which no ray
+    watches, moves (docs/training.md, "Acting")."""
 
     @property
     def n_joints(self) -> int:
