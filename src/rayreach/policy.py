@@ -142,7 +142,8 @@ class FinalApproach:
     training), so a deterministic rollout times out beside a goal it has reached in all but
     name (docs/training.md, "Acting"). The environment applies it
     (``EnvConfig.final_approach``), where the rays' hit points are known, and sets the
-    robot's step and tool (and radius, unless one is given). The straight path is ``radius`` long at most."""
+    robot's step and tool (and radius, unless one is given). The straight path is
+    ``radius`` long at most."""
 
     NEARER: ClassVar[float] = 0.001
     """How much nearer, m, the path may bring the tool to what it sees than the nearest hit
