@@ -12,7 +12,9 @@ import pybullet as p
 import pytest
 
 import rayreach
+from exp1_scenes import exp1_around_the_tool
 from rayreach.env import OBS_SIZE, ReachEnv
+from rayreach.scenarios.schema import ObstacleSpec
 from rayreach.sensors import N_RAYS
 from rayreach.transforms import matrix_to_rotvec, matrix_to_rpy, rotvec_to_matrix
 
@@ -321,6 +323,23 @@ def test_success_with_a_large_tolerance():
         assert terminated and not truncated
         assert info["is_success"] and info["reward_terms"]["success"] == 10.0
         assert reward == pytest.approx(10.0 + info["reward_terms"]["distance"])
+    finally:
+        env.close()
+
+
+def test_reaching_the_goal_in_contact_is_a_collision_not_a_success():
+    """A 0.5 m tolerance is met at once; the first step pushes the 2 cm tool into a plate 3 mm
+    from it, so the episode ends in a collision with no success reward."""
+    def plate_beside(ee):
+        return ObstacleSpec("box", (ee[0] + 0.025, ee[1], ee[2]), half_extents=(0.002, 0.05, 0.05))
+
+    env = exp1_around_the_tool([plate_beside], goal_tolerance=0.5)
+    try:
+        env.reset(seed=0)
+        _, reward, terminated, _, info = env.step(np.array([1, 0, 0, 0, 0, 0], np.float32))
+        assert terminated and info["goal_reached"] and info["collision"] and not info["is_success"]
+        assert info["reward_terms"]["success"] == 0.0 and info["reward_terms"]["collision"] == -10.0
+        assert reward == pytest.approx(sum(info["reward_terms"].values()))
     finally:
         env.close()
 

@@ -8,9 +8,10 @@ import pybullet as p
 import pytest
 
 from exp1_scenes import exp1_around_the_tool
-from rayreach.env import ReachEnv
+from rayreach.env import N_ROBOT_OBS, ReachEnv
 from rayreach.policy import FinalApproach, distances_to_parallelogram
 from rayreach.robots import get_robot
+from rayreach.safety import ACTING_SAFETY
 from rayreach.scenarios.schema import ObstacleSpec
 from rayreach.train import TrainConfig, make_env_fn, set_actor_trainable
 
@@ -139,6 +140,30 @@ def test_env_steps_past_a_wall_beside_the_goal_and_stops_at_one_across_the_path(
             assert not info["is_success"] and not info["collision"] and info["distance"] == pytest.approx(0.08, abs=1e-3)
         finally:
             env.close()
+
+
+def _wall_past_the_goal(ee):  # an upright plate across the path 6.5 cm ahead: 3.5 cm past a goal 3 cm ahead
+    return ObstacleSpec("box", (ee[0] + 0.065, ee[1], ee[2]), half_extents=(0.002, 0.05, 0.04))
+
+
+def test_the_shield_lets_the_straight_step_reach_a_goal_nearer_than_anything_seen():
+    """The wall is inside the 5 cm shield from the start, so the shield alone holds the tool
+    3 cm short; the goal is nearer than the wall, so the straight step reaches it."""
+    env = exp1_around_the_tool([_wall_past_the_goal], np.array([0.03, 0.0, 0.0]), safety=ACTING_SAFETY)
+    try:
+        obs, _ = env.reset(seed=0)
+        assert obs[N_ROBOT_OBS:].min() * env.config.ray_range < ACTING_SAFETY.ray_shield
+        info = _idle(env)
+        assert not info["collision"] and info["distance"] == pytest.approx(0.03, abs=1e-3)
+    finally:
+        env.close()
+    env = exp1_around_the_tool([_wall_past_the_goal], np.array([0.03, 0.0, 0.0]), safety=ACTING_SAFETY,
+                               final_approach=FinalApproach())
+    try:
+        info = _idle(env)
+        assert info["is_success"] and not info["collision"] and env.steps <= 7
+    finally:
+        env.close()
 
 
 def test_the_env_fills_in_the_robots_radius_unless_one_is_given():

@@ -57,6 +57,21 @@ def test_no_near_ray_is_approached_when_the_projections_interact():
     assert out[2] <= 0.0
 
 
+def test_a_known_travel_shorter_than_every_ray_lets_the_motion_through():
+    """The final approach's straight path ends at the goal: when every ray sees farther than
+    that, the shield has nothing to keep the tool off; otherwise it acts as without it."""
+    shield = SafetyLayer(ray_shield=0.05)
+    delta = np.array([0.005, 0.0, 0.0, 0.0, 0.0, 0.0])
+    distances, directions = np.array([0.03, 0.4]), np.stack((X, Y))
+    np.testing.assert_allclose(shield.filter(delta, INSIDE, LOW, HIGH, distances, directions, travel=0.02), delta)
+    for travel in (None, 0.03, 0.06):
+        np.testing.assert_allclose(shield.filter(delta, INSIDE, LOW, HIGH, distances, directions, travel=travel),
+                                   np.zeros(6))
+    guard = SafetyLayer(workspace_guard=0.01, ray_shield=0.05)  # the guard still holds the bound
+    at_bound = HIGH - [0.012, 0.2, 0.1]
+    np.testing.assert_allclose(guard.filter(delta, at_bound, LOW, HIGH, distances, directions, travel=0.02), 0.0)
+
+
 def test_guard_stops_at_a_bound_and_lets_the_tool_slide_along_it():
     guard = SafetyLayer(workspace_guard=0.01)
     near_top = np.array([0.0, 0.5, 0.487])

@@ -270,9 +270,10 @@ class ReachEnv(gym.Env):
         if cfg.safety.active:
             scenario = self.scenario
             commanded = delta[:3]
+            travel = None if straight is None else float(np.linalg.norm(self.goals[self.goal_index] - self.ee_pos))
             delta = cfg.safety.filter(delta, self.ee_pos, np.asarray(scenario.workspace_low),  # type: ignore[union-attr]
                                       np.asarray(scenario.workspace_high),  # type: ignore[union-attr]
-                                      self._ray_fractions * cfg.ray_range, self._ray_directions)
+                                      self._ray_fractions * cfg.ray_range, self._ray_directions, travel)
             if straight is None:  # the straight step is not the policy's choice
                 shielded = R.shielded_reward(commanded, delta[:3], w)
 
@@ -297,7 +298,7 @@ class ReachEnv(gym.Env):
         n_shakes = self._shake.update(distance)
         rays = self._cast_rays()
         terms = {
-            "success": R.success_reward(distance, self.tolerance, w),
+            "success": 0.0 if collided else R.success_reward(distance, self.tolerance, w),
             "collision": R.collision_reward(collided, w),
             "distance": R.distance_reward(distance, w),
             "shaking": R.shaking_reward(n_shakes, w),
@@ -308,7 +309,7 @@ class ReachEnv(gym.Env):
             "shielded": shielded,
         }
         final_goal = self.goal_index == len(self.goals) - 1
-        success = reached and final_goal
+        success = reached and final_goal and not collided  # a goal reached in contact is no success
         terminated = collided or outside or success
         truncated = not terminated and self.steps >= cfg.max_steps
         if truncated:

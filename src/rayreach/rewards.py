@@ -14,7 +14,8 @@ import numpy as np
 @dataclass(frozen=True)
 class RewardWeights:
     success: float = 10.0
-    """r_suc when the distance to the goal is below the goal tolerance."""
+    """r_suc when the distance to the goal is below the goal tolerance and the robot touches
+    nothing (a goal reached in contact ends the episode as a collision)."""
     collision: float = -10.0
     """r_c when the robot collides (the episode ends)."""
     distance: float = -0.01

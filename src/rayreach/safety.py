@@ -41,16 +41,21 @@ class SafetyLayer:
         return self.workspace_guard > 0 or self.ray_shield > 0
 
     def filter(self, delta: np.ndarray, ee_pos: np.ndarray, low: np.ndarray, high: np.ndarray,
-               ray_distances: np.ndarray, ray_directions: np.ndarray) -> np.ndarray:
+               ray_distances: np.ndarray, ray_directions: np.ndarray, travel: float | None = None) -> np.ndarray:
         """``delta`` (dx, dy, dz, rotation vector) as the arm may execute it. ``ray_distances``
-        (m) and unit ``ray_directions`` are those of the current observation.
+        (m) and unit ``ray_directions`` are those of the current observation. ``travel``: how
+        far, m, the motion goes in all when that is known (a straight path to the goal); if
+        every ray sees farther than that, nothing seen can be reached and the shield lets
+        the motion through. Without it, a goal a few centimetres from a wall could not be
+        reached: the wall stays within the shield all the way in.
 
         Each rule is a half-space the translation must lie in; removing one violation can
         create another (two near rays at an obtuse angle, a near ray and a bound), so the
         projections repeat until every rule holds, and the translation stops if they do not
         settle."""
         out = np.array(delta, dtype=float)
-        near = np.flatnonzero(ray_distances < self.ray_shield) if self.ray_shield > 0 else np.zeros(0, int)
+        shielded = self.ray_shield > 0 and (travel is None or travel >= ray_distances.min(initial=np.inf))
+        near = np.flatnonzero(ray_distances < self.ray_shield) if shielded else np.zeros(0, int)
         if near.size:
             out[3:] = 0.0
         directions = ray_directions[near[np.argsort(ray_distances[near])]]
