@@ -72,6 +72,24 @@ def test_a_known_travel_shorter_than_every_ray_lets_the_motion_through():
     np.testing.assert_allclose(guard.filter(delta, at_bound, LOW, HIGH, distances, directions, travel=0.02), 0.0)
 
 
+def test_slide_takes_the_goal_step_once_the_push_is_held():
+    """A push straight at a near wall (the X ray at 3 cm) is held; with a slide the layer
+    steps towards the goal instead, less its part towards the wall."""
+    layer = SafetyLayer(ray_shield=0.05, slide=0.1)
+    push = np.array([0.005, 0.0, 0.0, 0.0, 0.0, 0.0])
+    distances, directions = np.array([0.03, 0.4]), np.stack((X, Y))
+    goal_step = np.array([0.0035, 0.0035, 0.0])
+    out = layer.filter(push, INSIDE, LOW, HIGH, distances, directions, towards_goal=goal_step)
+    np.testing.assert_allclose(out, [0.0, 0.0035, 0.0, 0.0, 0.0, 0.0])
+    for held in (layer.filter(push, INSIDE, LOW, HIGH, distances, directions),  # no goal step given
+                 SafetyLayer(ray_shield=0.05).filter(push, INSIDE, LOW, HIGH, distances, directions,
+                                                     towards_goal=goal_step)):  # slide off
+        np.testing.assert_allclose(held, np.zeros(6))
+    oblique = np.array([0.005, 0.001, 0.0, 0.0, 0.0, 0.0])  # a fifth of it is left: no slide
+    np.testing.assert_allclose(layer.filter(oblique, INSIDE, LOW, HIGH, distances, directions, towards_goal=goal_step),
+                               [0.0, 0.001, 0.0, 0.0, 0.0, 0.0])
+
+
 def test_guard_stops_at_a_bound_and_lets_the_tool_slide_along_it():
     guard = SafetyLayer(workspace_guard=0.01)
     near_top = np.array([0.0, 0.5, 0.487])
@@ -86,6 +104,10 @@ def test_negative_settings_are_refused():
         SafetyLayer(ray_shield=-0.1)
     with pytest.raises(ValueError, match="workspace_guard must be >= 0"):
         SafetyLayer(workspace_guard=-0.01)
+    with pytest.raises(ValueError, match="slide must be >= 0"):
+        SafetyLayer(slide=-0.1)
+    with pytest.raises(ValueError, match="slide is a share"):
+        SafetyLayer(slide=1.5)
 
 
 def _box_behind(ee):  # its +x face 9 cm to the -x of the tool point
@@ -114,6 +136,17 @@ def test_shield_keeps_the_tool_off_a_box_the_policy_drives_into():
     assert info["collision"] and steps < 60  # the push alone hits the box
     steps, info = _push_into_a_box(ACTING_SAFETY)
     assert steps == 60 and not info["collision"]
+
+
+def test_slide_carries_the_held_tool_along_the_box_to_a_goal_beside_it():
+    """The push is held at the box; the goal lies 10 cm to the side of the start. The shield
+    alone holds the tool there; the slide carries it along the box to within 2 cm of the goal
+    (the last of it is the push's, which draws the tool back to the box whenever it leaves)."""
+    beside = np.array([0.0, 0.1, 0.0])
+    steps, info = _push_into_a_box(SafetyLayer(workspace_guard=0.01, ray_shield=0.05), goal_offset=beside)
+    assert steps == 60 and not info["collision"] and info["distance"] > 0.09
+    steps, info = _push_into_a_box(ACTING_SAFETY, goal_offset=beside)
+    assert steps == 60 and not info["collision"] and info["distance"] < 0.02
 
 
 def test_shielded_term_costs_each_held_step_and_nothing_before():

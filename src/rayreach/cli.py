@@ -119,6 +119,9 @@ def build_parser() -> argparse.ArgumentParser:
                       help="hold the tool this far inside the workspace, m (0: off; rayreach.safety)")
     roll.add_argument("--ray-shield", type=float, default=ACTING_SAFETY.ray_shield,
                       help="no motion towards what a ray sees nearer than this, m (0: off; rayreach.safety)")
+    roll.add_argument("--slide", type=float, default=ACTING_SAFETY.slide,
+                      help="step towards the goal when the layer leaves less than this share of the policy's step "
+                           "(0: off; rayreach.safety)")
     roll.add_argument("--seed", type=int, default=None, help="seed of the first random world (default 1000000)")
     roll.add_argument("--json", action="store_true", help="print one JSON line")
 
@@ -356,7 +359,7 @@ def _rollout(args: argparse.Namespace, scenario: str) -> int:
     from rayreach.rollout import EVAL_SEED_OFFSET, rollout
     from rayreach.safety import SafetyLayer
 
-    safety = SafetyLayer(args.workspace_guard, args.ray_shield)
+    safety = SafetyLayer(args.workspace_guard, args.ray_shield, args.slide)
     summary = rollout(args.model, scenario, episodes=args.episodes, deterministic=not args.stochastic,
                       goal_tolerance=args.tolerance, n_obstacles=args.obstacles, progress=not args.json,
                       final_approach=None if args.no_final_approach else FinalApproach(args.final_approach_radius),

@@ -270,10 +270,12 @@ class ReachEnv(gym.Env):
         if cfg.safety.active:
             scenario = self.scenario
             commanded = delta[:3]
-            travel = None if straight is None else float(np.linalg.norm(self.goals[self.goal_index] - self.ee_pos))
+            offset = self.goals[self.goal_index] - self.ee_pos
+            travel = None if straight is None else float(np.linalg.norm(offset))
+            towards_goal = None if straight is not None else offset / max(float(np.linalg.norm(offset)), 1e-9) * self._step_scale[0]
             delta = cfg.safety.filter(delta, self.ee_pos, np.asarray(scenario.workspace_low),  # type: ignore[union-attr]
                                       np.asarray(scenario.workspace_high),  # type: ignore[union-attr]
-                                      self._ray_fractions * cfg.ray_range, self._ray_directions, travel)
+                                      self._ray_fractions * cfg.ray_range, self._ray_directions, travel, towards_goal)
             if straight is None:  # the straight step is not the policy's choice
                 shielded = R.shielded_reward(commanded, delta[:3], w)
 

@@ -30,30 +30,48 @@ class SafetyLayer:
     ray_shield: float = 0.0
     """When a ray sees something nearer than this, m, drop the translation along that ray
     (towards what it sees) and the whole rotation; 0: off."""
+    slide: float = 0.0
+    """When the rules leave less than this share of the commanded translation (a policy
+    pushing straight into what it sees holds still until its step budget runs out), take the
+    step towards the goal instead, through the same rules: the tool slides along what it
+    sees towards the goal; 0: off."""
 
     def __post_init__(self) -> None:
-        for name in ("workspace_guard", "ray_shield"):
+        for name in ("workspace_guard", "ray_shield", "slide"):
             if not getattr(self, name) >= 0:
                 raise ValueError(f"{name} must be >= 0 (0 = off), got {getattr(self, name)}")
+        if self.slide > 1:
+            raise ValueError(f"slide is a share of the commanded step, 0 to 1, got {self.slide}")
 
     @property
     def active(self) -> bool:
         return self.workspace_guard > 0 or self.ray_shield > 0
 
     def filter(self, delta: np.ndarray, ee_pos: np.ndarray, low: np.ndarray, high: np.ndarray,
-               ray_distances: np.ndarray, ray_directions: np.ndarray, travel: float | None = None) -> np.ndarray:
+               ray_distances: np.ndarray, ray_directions: np.ndarray, travel: float | None = None,
+               towards_goal: np.ndarray | None = None) -> np.ndarray:
         """``delta`` (dx, dy, dz, rotation vector) as the arm may execute it. ``ray_distances``
         (m) and unit ``ray_directions`` are those of the current observation. ``travel``: how
         far, m, the motion goes in all when that is known (a straight path to the goal); if
         every ray sees farther than that, nothing seen can be reached and the shield lets
         the motion through. Without it, a goal a few centimetres from a wall could not be
-        reached: the wall stays within the shield all the way in.
+        reached: the wall stays within the shield all the way in. ``towards_goal``: the
+        translation ``slide`` takes instead (None: no slide).
 
         Each rule is a half-space the translation must lie in; removing one violation can
         create another (two near rays at an obtuse angle, a near ray and a bound), so the
         projections repeat until every rule holds, and the translation stops if they do not
         settle."""
-        out = np.array(delta, dtype=float)
+        rays = (ee_pos, low, high, ray_distances, ray_directions)
+        out = self._apply(np.array(delta, dtype=float), *rays, travel)
+        if (self.slide > 0 and towards_goal is not None
+                and np.linalg.norm(out[:3]) < self.slide * np.linalg.norm(delta[:3])):
+            return self._apply(np.concatenate([towards_goal, out[3:]]), *rays, None)
+        return out
+
+    def _apply(self, out: np.ndarray, ee_pos: np.ndarray, low: np.ndarray, high: np.ndarray,
+               ray_distances: np.ndarray, ray_directions: np.ndarray, travel: float | None) -> np.ndarray:
+        """``filter`` without the slide; changes ``out`` in place and returns it."""
         shielded = self.ray_shield > 0 and (travel is None or travel >= ray_distances.min(initial=np.inf))
         near = np.flatnonzero(ray_distances < self.ray_shield) if shielded else np.zeros(0, int)
         if near.size:
@@ -80,6 +98,7 @@ class SafetyLayer:
         return out
 
 
-ACTING_SAFETY = SafetyLayer(workspace_guard=0.01, ray_shield=0.05)
-"""The layer the executor and ``rollout`` act with: two 5 mm steps from a bound, and a
-5 cm shield (chosen from 3, 5 and 8 cm on random worlds: docs/training.md, "Acting")."""
+ACTING_SAFETY = SafetyLayer(workspace_guard=0.01, ray_shield=0.05, slide=0.1)
+"""The layer the executor and ``rollout`` act with: two 5 mm steps from a bound, a 5 cm
+shield (chosen from 3, 5 and 8 cm on random worlds) and a slide once less than a tenth of
+a step is left (docs/training.md, "Acting")."""
