@@ -33,8 +33,8 @@ class SafetyLayer:
     slide: float = 0.0
     """When the rules leave less than this share of the commanded translation (a policy
     pushing straight into what it sees holds still until its step budget runs out), take the
-    step towards the goal instead, through the same rules: the tool slides along what it
-    sees towards the goal; 0: off."""
+    step towards the goal instead, through the same rules and without rotation: the tool
+    slides along what it sees towards the goal; 0: off."""
 
     def __post_init__(self) -> None:
         for name in ("workspace_guard", "ray_shield", "slide"):
@@ -66,7 +66,7 @@ class SafetyLayer:
         out = self._apply(np.array(delta, dtype=float), *rays, travel)
         if (self.slide > 0 and towards_goal is not None
                 and np.linalg.norm(out[:3]) < self.slide * np.linalg.norm(delta[:3])):
-            return self._apply(np.concatenate([towards_goal, out[3:]]), *rays, None)
+            return self._apply(np.concatenate([towards_goal, np.zeros(3)]), *rays, None)
         return out
 
     def _apply(self, out: np.ndarray, ee_pos: np.ndarray, low: np.ndarray, high: np.ndarray,
