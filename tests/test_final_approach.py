@@ -166,6 +166,43 @@ def test_the_shield_lets_the_straight_step_reach_a_goal_nearer_than_anything_see
         env.close()
 
 
+def test_a_stall_is_too_little_progress_over_the_last_steps():
+    approach = FinalApproach(radius=0.1, stall_steps=3, stall_gain=0.01)
+    assert not approach.stalled([0.3, 0.3, 0.3])  # not 3 steps yet
+    assert approach.stalled([0.3, 0.3, 0.3, 0.295])
+    assert not approach.stalled([0.3, 0.3, 0.3, 0.285])
+    assert approach.stalled([0.4, 0.3, 0.3, 0.3, 0.3])  # only the last 3 steps count
+    assert not FinalApproach(radius=0.1, stall_steps=0).stalled([0.3] * 50)
+    np.testing.assert_allclose(approach.towards(np.array([0.03, 0.0, -0.04])), [0.6, 0.0, -0.8, 0, 0, 0])
+
+
+def test_env_steps_towards_the_goal_after_a_stall_and_not_before():
+    """A policy that stands still 10.7 cm from the goal, outside the UR5's 10 cm radius: after
+    100 steps without progress the env nudges the tool towards the goal, inside the radius,
+    and the final approach finishes; without the stall rule it stands still to the end."""
+    for stall_steps, reached in ((0, False), (100, True)):
+        env = exp1_around_the_tool([], np.array([0.107, 0.0, 0.0]), final_approach=FinalApproach(stall_steps=stall_steps))
+        try:
+            info = _idle(env, steps=150)
+            assert info["is_success"] == reached and not info["collision"]
+            if reached:
+                assert 100 < env.steps <= 100 + 22  # 10.7 cm of 5 mm steps
+            else:
+                assert info["distance"] == pytest.approx(0.107, abs=1e-3)
+        finally:
+            env.close()
+
+
+def test_the_stall_window_starts_again_at_each_goal():
+    env = ReachEnv(robot="ur5", scenario="exp2", goal_tolerance=0.3, final_approach=FinalApproach(stall_steps=2))
+    try:
+        env.reset(seed=0)
+        _, _, _, _, info = env.step(np.zeros(6, np.float32))
+        assert info["goal_index"] == 1 and env._distances == [info["distance"]]
+    finally:
+        env.close()
+
+
 def test_the_env_fills_in_the_robots_radius_unless_one_is_given():
     for robot, radius in (("ur5", 0.1), ("kr16", 0.2)):
         env = ReachEnv(robot=robot, scenario="random", final_approach=FinalApproach())

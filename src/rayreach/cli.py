@@ -27,6 +27,7 @@ def _pick_scenario(args: argparse.Namespace, parser: argparse.ArgumentParser) ->
 
 def build_parser() -> argparse.ArgumentParser:
     from rayreach.demonstrations import EXPERTS, CloneConfig  # numpy only
+    from rayreach.policy import FinalApproach  # numpy only
     from rayreach.safety import ACTING_SAFETY  # numpy only
 
     parser = argparse.ArgumentParser(prog="rayreach", description=__doc__)
@@ -115,6 +116,8 @@ def build_parser() -> argparse.ArgumentParser:
     roll.add_argument("--final-approach-radius", type=float, default=None,
                       help="distance to the goal within which the final approach may act, m (default: the robot's, "
                            "UR5 0.1, KR16 0.2)")
+    roll.add_argument("--stall-steps", type=int, default=FinalApproach.stall_steps,
+                      help="step towards the goal once this many steps brought it less than 1 cm nearer (0: off)")
     roll.add_argument("--workspace-guard", type=float, default=ACTING_SAFETY.workspace_guard,
                       help="hold the tool this far inside the workspace, m (0: off; rayreach.safety)")
     roll.add_argument("--ray-shield", type=float, default=ACTING_SAFETY.ray_shield,
@@ -362,7 +365,8 @@ def _rollout(args: argparse.Namespace, scenario: str) -> int:
     safety = SafetyLayer(args.workspace_guard, args.ray_shield, args.slide)
     summary = rollout(args.model, scenario, episodes=args.episodes, deterministic=not args.stochastic,
                       goal_tolerance=args.tolerance, n_obstacles=args.obstacles, progress=not args.json,
-                      final_approach=None if args.no_final_approach else FinalApproach(args.final_approach_radius),
+                      final_approach=None if args.no_final_approach
+                      else FinalApproach(args.final_approach_radius, stall_steps=args.stall_steps),
                       safety=safety,
                       seed=EVAL_SEED_OFFSET if args.seed is None else args.seed)
     if args.json:

@@ -245,6 +245,7 @@ class ReachEnv(gym.Env):
         self._ready = True
         distance = float(np.linalg.norm(self.goals[0] - self.ee_pos))
         self._previous_distance = distance
+        self._distances = [distance]  # to the current goal, one per step (the final approach's stall rule)
         info = {"distance": distance, "ee_position": self.ee_pos.copy(), "goal": self.goals[0].copy(),
                 "is_success": False}
         return self._observation(distance, self._cast_rays()), info
@@ -257,12 +258,15 @@ class ReachEnv(gym.Env):
             raise ValueError(f"action must have 6 values (dx, dy, dz, droll, dpitch, dyaw), got shape {np.shape(action)}")
         if not np.all(np.isfinite(a)):
             raise ValueError(f"action contains NaN or infinity: {a.tolist()}; the scene is unchanged")
-        straight = None
+        straight, stalled = None, False
         if self._final_approach is not None:
             straight = self._final_approach.action(self.goals[self.goal_index] - self.ee_pos, self.ray_hits(),
                                                    self.ee_rot[:, 2])
             if straight is not None:
                 a = straight
+            elif self._final_approach.stalled(self._distances):
+                stalled = True
+                a = self._final_approach.towards(self.goals[self.goal_index] - self.ee_pos)
         delta = np.clip(a, -1.0, 1.0) * self._step_scale
         cfg = self.config
         w = cfg.rewards
@@ -271,12 +275,13 @@ class ReachEnv(gym.Env):
             scenario = self.scenario
             commanded = delta[:3]
             offset = self.goals[self.goal_index] - self.ee_pos
-            travel = None if straight is None else float(np.linalg.norm(offset))
-            towards_goal = None if straight is not None else offset / max(float(np.linalg.norm(offset)), 1e-9) * self._step_scale[0]
+            to_goal = max(float(np.linalg.norm(offset)), 1e-9)
+            travel = None if straight is None else to_goal  # the straight step: how far it goes in all
+            towards_goal = None if straight is not None else offset / to_goal * self._step_scale[0]  # for a slide
             delta = cfg.safety.filter(delta, self.ee_pos, np.asarray(scenario.workspace_low),  # type: ignore[union-attr]
                                       np.asarray(scenario.workspace_high),  # type: ignore[union-attr]
                                       self._ray_fractions * cfg.ray_range, self._ray_directions, travel, towards_goal)
-            if straight is None:  # the straight step is not the policy's choice
+            if straight is None and not stalled:  # neither step is the policy's choice
                 shielded = R.shielded_reward(commanded, delta[:3], w)
 
         target_pos = self.ee_pos + delta[:3]
@@ -320,7 +325,9 @@ class ReachEnv(gym.Env):
             self.goal_index += 1
             self._shake.reset()
             distance = float(np.linalg.norm(self.goals[self.goal_index] - self.ee_pos))
+            self._distances = []
         self._previous_distance = distance
+        self._distances.append(distance)
         if terminated or truncated:
             self._ready = False
         info = {

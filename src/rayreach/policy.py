@@ -15,7 +15,7 @@ import tempfile
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, ClassVar
+from typing import Any, ClassVar, Sequence
 
 import numpy as np
 
@@ -164,14 +164,35 @@ class FinalApproach:
     """Length of the cylindrical tool behind the end effector, m (0: the tip alone)."""
     tool_radius: float = 0.0
     """Radius of that tool, m."""
+    stall_steps: int = 100
+    """When the last this many steps brought the end effector less than ``stall_gain``
+    nearer the goal, step towards it instead of the policy (through the safety layer), from
+    any distance, until they have: a nudge of about ``stall_gain``, after which the policy
+    acts again from a new state. The mean action of a policy that hovers or presses against
+    what it sees repeats itself until the step budget runs out; 0: off."""
+    stall_gain: float = 0.01
+    """Least progress towards the goal, m, over ``stall_steps`` steps."""
 
     def __post_init__(self) -> None:
-        for name in ("radius", "ee_step"):
+        for name in ("radius", "ee_step", "stall_gain"):
             if getattr(self, name) is not None and not getattr(self, name) > 0:
                 raise ValueError(f"{name} must be positive, got {getattr(self, name)}")
-        for name in ("margin", "tool_length", "tool_radius"):
+        for name in ("margin", "tool_length", "tool_radius", "stall_steps"):
             if not getattr(self, name) >= 0:
                 raise ValueError(f"{name} must be >= 0, got {getattr(self, name)}")
+
+    def stalled(self, distances: Sequence[float]) -> bool:
+        """Whether ``distances`` (to the current goal after each step, oldest first) show a
+        stall: ``stall_steps`` steps that brought the end effector less than ``stall_gain``
+        nearer."""
+        n = self.stall_steps
+        return n > 0 and len(distances) > n and distances[-n - 1] - distances[-1] < self.stall_gain
+
+    def towards(self, goal_offset: np.ndarray) -> np.ndarray:
+        """A full step along ``goal_offset`` (goal minus end effector, m), as an action."""
+        action = np.zeros(6, dtype=np.float32)
+        action[:3] = np.asarray(goal_offset, dtype=float) / max(float(np.linalg.norm(goal_offset)), 1e-9)
+        return action
 
     def action(self, goal_offset: np.ndarray, hits: np.ndarray,
                tool_direction: np.ndarray | None = None) -> np.ndarray | None:
