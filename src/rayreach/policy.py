@@ -183,6 +183,8 @@ class FinalApproach:
         for name in ("margin", "tool_length", "tool_radius", "stall_steps"):
             if not getattr(self, name) >= 0:
                 raise ValueError(f"{name} must be >= 0, got {getattr(self, name)}")
+        if not isinstance(self.stall_steps, (int, np.integer)):
+            raise ValueError(f"stall_steps must be a whole number of steps, got {self.stall_steps}")
 
     def stalled(self, distances: Sequence[float]) -> bool:
         """Whether ``distances`` (to the current goal after each step, oldest first) show a
