@@ -258,15 +258,15 @@ class ReachEnv(gym.Env):
             raise ValueError(f"action must have 6 values (dx, dy, dz, droll, dpitch, dyaw), got shape {np.shape(action)}")
         if not np.all(np.isfinite(a)):
             raise ValueError(f"action contains NaN or infinity: {a.tolist()}; the scene is unchanged")
+        offset = self.goals[self.goal_index] - self.ee_pos
         straight, stalled = None, False
         if self._final_approach is not None:
-            straight = self._final_approach.action(self.goals[self.goal_index] - self.ee_pos, self.ray_hits(),
-                                                   self.ee_rot[:, 2])
+            straight = self._final_approach.action(offset, self.ray_hits(), self.ee_rot[:, 2])
             if straight is not None:
                 a = straight
             elif self._final_approach.stalled(self._distances):
                 stalled = True
-                a = self._final_approach.towards(self.goals[self.goal_index] - self.ee_pos)
+                a = FinalApproach.towards(offset)
         delta = np.clip(a, -1.0, 1.0) * self._step_scale
         cfg = self.config
         w = cfg.rewards
@@ -274,10 +274,8 @@ class ReachEnv(gym.Env):
         if cfg.safety.active:
             scenario = self.scenario
             commanded = delta[:3]
-            offset = self.goals[self.goal_index] - self.ee_pos
-            to_goal = max(float(np.linalg.norm(offset)), 1e-9)
-            travel = None if straight is None else to_goal  # the straight step: how far it goes in all
-            towards_goal = None if straight is not None else offset / to_goal * self._step_scale[0]  # for a slide
+            travel = None if straight is None else float(np.linalg.norm(offset))  # the straight step, in all
+            towards_goal = None if straight is not None else FinalApproach.towards(offset)[:3] * self._step_scale[:3]
             delta = cfg.safety.filter(delta, self.ee_pos, np.asarray(scenario.workspace_low),  # type: ignore[union-attr]
                                       np.asarray(scenario.workspace_high),  # type: ignore[union-attr]
                                       self._ray_fractions * cfg.ray_range, self._ray_directions, travel, towards_goal)

@@ -193,8 +193,10 @@ class FinalApproach:
         n = self.stall_steps
         return n > 0 and len(distances) > n and distances[-n - 1] - distances[-1] < self.stall_gain
 
-    def towards(self, goal_offset: np.ndarray) -> np.ndarray:
-        """A full step along ``goal_offset`` (goal minus end effector, m), as an action."""
+    @staticmethod
+    def towards(goal_offset: np.ndarray) -> np.ndarray:
+        """A full step along ``goal_offset`` (goal minus end effector, m), as an action (also the
+        safety layer's slide, ``ReachEnv.step``)."""
         action = np.zeros(6, dtype=np.float32)
         action[:3] = np.asarray(goal_offset, dtype=float) / max(float(np.linalg.norm(goal_offset)), 1e-9)
         return action
