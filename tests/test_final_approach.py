@@ -13,7 +13,7 @@ from rayreach.policy import FinalApproach, distances_to_parallelogram
 from rayreach.robots import get_robot
 from rayreach.safety import ACTING_SAFETY
 from rayreach.scenarios.schema import ObstacleSpec
-from rayreach.train import TrainConfig, make_env_fn, set_actor_trainable
+from rayreach.train import TrainConfig, make_env_fn, set_trainable
 
 APPROACH = FinalApproach(radius=0.1, margin=0.02, ee_step=0.005)
 NOTHING = np.zeros((0, 3))
@@ -273,7 +273,10 @@ def test_training_envs_act_with_the_layers_only_when_asked():
             env.close()
 
 
-def test_critic_warmup_freezes_everything_but_the_critic_layers():
+@pytest.mark.parametrize("actor, features", [(False, False), (True, False)])
+def test_set_trainable_moves_only_what_it_frees(actor, features):
+    """Critic warm-up (actor and extractor held) and a part with the extractor held: one
+    PPO update changes exactly the parameters left trainable."""
     from stable_baselines3 import PPO
 
     from rayreach.train import build_model, build_vec_env
@@ -284,13 +287,15 @@ def test_critic_warmup_freezes_everything_but_the_critic_layers():
         model: PPO = build_model(config, venv, None)
         policy = model.policy
         critic = {id(q) for m in (policy.mlp_extractor.value_net, policy.value_net) for q in m.parameters()}
-        set_actor_trainable(policy, False)
+        extractor = {id(q) for q in policy.features_extractor.parameters()}
+        set_trainable(policy, actor=actor, features=features)
         before = {name: q.detach().clone() for name, q in policy.named_parameters()}
         model.learn(64)
         for name, q in policy.named_parameters():
             changed = not np.allclose(before[name].numpy(), q.detach().numpy())
-            assert changed == (id(q) in critic), name
-        set_actor_trainable(policy, True)
+            expected = id(q) in critic or (actor and id(q) not in extractor)
+            assert changed == expected, name
+        set_trainable(policy)
         assert all(q.requires_grad for q in policy.parameters())
     finally:
         venv.close()

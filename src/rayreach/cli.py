@@ -99,6 +99,10 @@ def build_parser() -> argparse.ArgumentParser:
                        help="train with the final approach and safety layer the planner acts with (kept on --resume)")
     train.add_argument("--critic-warmup", type=int, default=0,
                        help="steps at the start of this part in which only the critic learns (after clone)")
+    train.add_argument("--learning-rate", type=float, default=None,
+                       help="Adam step size (default 3e-4, the paper's; also changes a resumed run)")
+    train.add_argument("--freeze-features", action="store_true",
+                       help="hold the shared feature extractor fixed for this part (fine-tuning after clone)")
     train.add_argument("--goal-size", type=float, default=None, help="fix the goal size, m (no goal curriculum)")
     train.add_argument("--true-goal-share", type=float, default=None,
                        help="share of episodes at the true goal size while the goal is enlarged (default 0.5; "
@@ -350,10 +354,14 @@ def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
         overrides["true_goal_share"] = args.true_goal_share
     if args.acting_layers:
         overrides["acting_layers"] = True
+    if args.learning_rate is not None:
+        if not args.learning_rate > 0:
+            raise ValueError(f"--learning-rate must be > 0, got {args.learning_rate}")
+        overrides["learning_rate"] = args.learning_rate
     config = replace(config, **overrides)
     command = "rayreach " + " ".join(sys.argv[1:] if argv is None else argv)
     path = train(config, args.out, resume=args.resume, command=command, resume_overrides=overrides,
-                 critic_warmup=args.critic_warmup)
+                 critic_warmup=args.critic_warmup, freeze_features=args.freeze_features)
     print(f"model: {path}")
     return 0
 

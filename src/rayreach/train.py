@@ -166,19 +166,27 @@ def build_model(config: TrainConfig, venv, tensorboard_dir: str | None):
     )
 
 
-def set_actor_trainable(policy, trainable: bool) -> None:
-    """Freeze (or free) every parameter but the critic's own layers.
+def set_trainable(policy, actor: bool = True, features: bool = True) -> None:
+    """Freeze (or free) the actor's own layers and the feature extractor; the critic's own
+    layers always learn.
 
     A checkpoint whose actor was just refitted by cloning has a critic that values the old
     actor, and through the shared extractor its first PPO updates would move the new actor
-    on those stale advantages; ``train(critic_warmup=N)`` fits the critic alone first."""
+    on those stale advantages: ``train(critic_warmup=N)`` fits the critic alone first
+    (``actor=False``, which holds the extractor too). ``train(freeze_features=True)`` keeps
+    the extractor fixed for a whole part (``features=False``), so that the critic's value
+    loss, which reaches the actor through shared features, cannot reshape them."""
     critic = [policy.mlp_extractor.value_net, policy.value_net]
     if not policy.share_features_extractor:
         critic.append(policy.vf_features_extractor)
+    extractor = [policy.features_extractor, policy.pi_features_extractor]
     own = {id(p) for module in critic for p in module.parameters()}
+    shared = {id(p) for module in extractor for p in module.parameters()} - own
     for p in policy.parameters():
-        if id(p) not in own:
-            p.requires_grad_(trainable)
+        if id(p) in shared:
+            p.requires_grad_(actor and features)
+        elif id(p) not in own:
+            p.requires_grad_(actor)
 
 
 # ---------------------------------------------------------------------- bookkeeping
@@ -237,7 +245,8 @@ class TrainState:
         )
 
 
-def _make_callback(config: TrainConfig, state: TrainState, out: Path, total: int, critic_warmup: int = 0):
+def _make_callback(config: TrainConfig, state: TrainState, out: Path, total: int, critic_warmup: int = 0,
+                   freeze_features: bool = False):
     import torch
     from stable_baselines3.common.callbacks import BaseCallback
     from tqdm import tqdm
@@ -270,7 +279,7 @@ def _make_callback(config: TrainConfig, state: TrainState, out: Path, total: int
             self._push(goal=True, obstacles=True)
             if critic_warmup > 0:
                 self.actor_frozen_until = self.num_timesteps + critic_warmup
-                set_actor_trainable(self.model.policy, False)
+            set_trainable(self.model.policy, actor=critic_warmup == 0, features=not freeze_features)
 
         def _push(self, goal: bool, obstacles: bool) -> None:
             if goal:
@@ -310,7 +319,7 @@ def _make_callback(config: TrainConfig, state: TrainState, out: Path, total: int
         def _on_rollout_end(self) -> None:
             torch.set_num_threads(threads)  # the PPO update does gain from all cores
             if self.actor_frozen_until and self.num_timesteps >= self.actor_frozen_until:
-                set_actor_trainable(self.model.policy, True)
+                set_trainable(self.model.policy, actor=True, features=not freeze_features)
                 self.actor_frozen_until = 0
             self.logger.record("train/actor_frozen", int(bool(self.actor_frozen_until)))
             row = {"timesteps": self.num_timesteps, "episodes": state.episodes,
@@ -403,14 +412,16 @@ def config_from_meta(meta: dict[str, Any]) -> TrainConfig:
 
 # ---------------------------------------------------------------------- entry point
 def train(config: TrainConfig, out: str | Path, resume: bool = False, command: str = "",
-          resume_overrides: dict[str, Any] | None = None, critic_warmup: int = 0) -> Path:
+          resume_overrides: dict[str, Any] | None = None, critic_warmup: int = 0,
+          freeze_features: bool = False) -> Path:
     """Train (or resume) into ``out``; returns the path of the final model bundle.
 
     A resumed run keeps its saved configuration except ``timesteps``, ``workers`` and the
     fields named in ``resume_overrides`` (e.g. a new ``true_goal_share`` for a second part, or
     ``obstacles`` to hold the count, which restarts the obstacle curriculum).
-    ``critic_warmup``: steps at the start of this part in which only the critic learns
-    (``set_actor_trainable``)."""
+    ``critic_warmup``: steps at the start of this part in which only the critic learns;
+    ``freeze_features``: the feature extractor stays fixed for this part (``set_trainable``).
+    A ``learning_rate`` in ``resume_overrides`` replaces the saved one."""
     if critic_warmup < 0:
         raise ValueError(f"critic_warmup must be >= 0 steps, got {critic_warmup}")
     out = Path(out)
@@ -442,12 +453,14 @@ def train(config: TrainConfig, out: str | Path, resume: bool = False, command: s
         tensorboard_dir = str(out / "tensorboard") if _has_tensorboard() else None
         if resume:
             model = PPO.load(str(checkpoint), env=venv, device=config.device, tensorboard_log=tensorboard_dir)
+            model.learning_rate = config.learning_rate
+            model._setup_lr_schedule()  # SB3 keeps the saved schedule otherwise
             if norm is not None:
                 restore_normalization(venv, norm)
         else:
             model = build_model(config, venv, tensorboard_dir)
         remaining = config.timesteps - model.num_timesteps
-        callback = _make_callback(config, state, out, config.timesteps, critic_warmup)
+        callback = _make_callback(config, state, out, config.timesteps, critic_warmup, freeze_features)
         interrupted = False
         if remaining > 0:
             previous = signal.getsignal(signal.SIGTERM)
