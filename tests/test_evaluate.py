@@ -12,7 +12,7 @@ import pytest
 
 from rayreach.evaluate import EvaluationConfig, evaluate, parse_experiments, write_report
 from rayreach.evaluate import runner
-from rayreach.evaluate.report import markdown_table, resample, summarise
+from rayreach.evaluate.report import box_edges, markdown_table, resample, summarise
 from rayreach.evaluate.store import ResultsStore
 from rayreach.planners import make_planner
 from rayreach.planners.base import GlobalPlanner
@@ -141,3 +141,23 @@ def test_resample_is_even_in_arc_length():
     r = resample(points, 5)
     np.testing.assert_allclose(r[[0, -1]], points[[0, -1]])
     np.testing.assert_allclose(np.linalg.norm(np.diff(r, axis=0), axis=1), 1.0)
+
+
+def test_box_edges_follow_pybullets_pose_of_a_rotated_box():
+    """The plotted edges of a box with roll, pitch and yaw end at the corners PyBullet places
+    for the same pose, and each is as long as the box's side along that axis."""
+    import pybullet as pb
+
+    centre, half, rpy = (0.4, -0.1, 0.3), (0.05, 0.1, 0.002), (0.3, -0.2, 1.1)
+    quat = pb.getQuaternionFromEuler(rpy)
+    expected = np.array([pb.multiplyTransforms(centre, quat, (sx * half[0], sy * half[1], sz * half[2]),
+                                               (0, 0, 0, 1))[0]
+                         for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
+    edges = box_edges(centre, half, rpy)
+    assert len(edges) == 12
+    ends = np.unique(np.round([p for edge in edges for p in edge], 9), axis=0)
+    assert len(ends) == 8
+    nearest = np.linalg.norm(ends[:, None] - expected[None], axis=2)  # PyBullet computes in float32
+    assert np.all(nearest.min(axis=1) < 1e-6) and len(set(nearest.argmin(axis=1))) == 8
+    lengths = sorted(round(float(np.linalg.norm(a - b)), 9) for a, b in edges)
+    assert lengths == sorted([2 * h for h in half for _ in range(4)])

@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from rayreach.evaluate.store import COLUMNS, ResultsStore
+from rayreach.transforms import rpy_to_matrix
 
 PAPER = {
     "execution_time": {"drl": [0.84, 2.15, 3.05, 1.29, 1.29, 1.30, 1.33],
@@ -171,13 +172,17 @@ def resample(points: np.ndarray, n: int = 100) -> np.ndarray:
     return np.stack([np.interp(t, s, points[:, k]) for k in range(3)], axis=1)
 
 
-def _draw_box(ax, centre, half, colour="0.5") -> None:
-    c, h = np.asarray(centre), np.asarray(half)
-    corners = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)]) * h + c
-    for i in range(8):
-        for j in range(i + 1, 8):
-            if np.sum(np.abs(corners[i] - corners[j]) > 1e-12) == 1:
-                ax.plot(*zip(corners[i], corners[j]), color=colour, lw=0.6)
+def box_edges(centre, half, rpy=(0.0, 0.0, 0.0)) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The 12 edges of a box posed like PyBullet's (``rpy`` about fixed x, y, z), as point pairs."""
+    signs = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], dtype=float)
+    corners = (signs * np.asarray(half)) @ rpy_to_matrix(rpy).T + np.asarray(centre)
+    return [(corners[i], corners[j]) for i in range(8) for j in range(i + 1, 8)
+            if np.count_nonzero(signs[i] != signs[j]) == 1]
+
+
+def _draw_box(ax, centre, half, rpy, colour="0.5") -> None:
+    for a, b in box_edges(centre, half, rpy):
+        ax.plot(*zip(a, b), color=colour, lw=0.6)
 
 
 def trajectory_figure(store: ResultsStore, experiments: list[str], planners: list[str], path: Path) -> Path:
@@ -199,7 +204,7 @@ def trajectory_figure(store: ResultsStore, experiments: list[str], planners: lis
         scenario = get_scenario(experiment)
         for obstacle in scenario.obstacles:
             if obstacle.shape == "box" and not obstacle.moving:
-                _draw_box(ax, obstacle.position, obstacle.half_extents)
+                _draw_box(ax, obstacle.position, obstacle.half_extents, obstacle.rpy)
         by_planner: dict[str, list[np.ndarray]] = defaultdict(list)
         for planner, _, success, points in store.paths(experiment):
             if planner not in colours or len(points) == 0:
