@@ -127,3 +127,11 @@ def test_train_state_keeps_true_size_outcomes_apart():
     assert state.rate("collision", true_size=True) == 0.5
     again = TrainState.from_dict(state.to_dict())
     assert list(again.recent_true) == ["collision", "success"] and again.episodes == 4
+
+
+def test_the_update_uses_no_more_threads_than_the_run_has_workers():
+    from rayreach.train import TrainConfig, update_threads
+
+    assert update_threads(TrainConfig(workers=1), 2) == 1
+    assert update_threads(TrainConfig(workers=2), 2) == 2
+    assert update_threads(TrainConfig(workers=4), 2) == 2

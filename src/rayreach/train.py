@@ -245,13 +245,20 @@ class TrainState:
         )
 
 
+def update_threads(config: TrainConfig, available: int) -> int:
+    """Torch threads for the PPO update: no more than the run's worker processes, the cores
+    it was given. Two runs sharing two cores, each updating with two threads, ran at 160
+    steps/s each instead of 1,400 (docs/performance.md)."""
+    return max(1, min(available, config.workers))
+
+
 def _make_callback(config: TrainConfig, state: TrainState, out: Path, total: int, critic_warmup: int = 0,
                    freeze_features: bool = False):
     import torch
     from stable_baselines3.common.callbacks import BaseCallback
     from tqdm import tqdm
 
-    threads = torch.get_num_threads()
+    threads = update_threads(config, torch.get_num_threads())
 
     class TrainingCallback(BaseCallback):
         """Feeds episode outcomes to the curricula (one state for all envs), logs rates and
@@ -317,7 +324,7 @@ def _make_callback(config: TrainConfig, state: TrainState, out: Path, total: int
             return True
 
         def _on_rollout_end(self) -> None:
-            torch.set_num_threads(threads)  # the PPO update does gain from all cores
+            torch.set_num_threads(threads)  # the PPO update does gain from more cores
             if self.actor_frozen_until and self.num_timesteps >= self.actor_frozen_until:
                 set_trainable(self.model.policy, actor=True, features=not freeze_features)
                 self.actor_frozen_until = 0
