@@ -8,7 +8,7 @@ import pytest
 from exp1_scenes import exp1_around_the_tool
 from rayreach.env import ReachEnv
 from rayreach.rewards import RewardWeights
-from rayreach.safety import ACTING_SAFETY, SafetyLayer
+from rayreach.safety import ACTING_SAFETY, SafetyLayer, nearest_in_cone
 from rayreach.scenarios.schema import ObstacleSpec
 
 FAR = np.full(3, 0.4)
@@ -55,6 +55,45 @@ def test_no_near_ray_is_approached_when_the_projections_interact():
                       np.array([0.02]), ahead_below[None])
     assert out[:3] @ ahead_below <= 1e-9
     assert out[2] <= 0.0
+
+
+def _dykstra(move: np.ndarray, normals: np.ndarray, rounds: int) -> np.ndarray:
+    """Reference: Dykstra's alternating projections, which converge to the nearest point of
+    an intersection of half-spaces (plain alternating projections need not)."""
+    x, corrections = move.copy(), np.zeros_like(normals)
+    for _ in range(rounds):
+        for i, n in enumerate(normals):
+            y = x + corrections[i]
+            x = y - max(0.0, float(y @ n)) * n
+            corrections[i] = y - x
+    return x
+
+
+def test_nearest_in_cone_is_the_projection_dykstra_converges_to():
+    rng = np.random.default_rng(0)
+    for k in (1, 2, 3, 5, 8):
+        for _ in range(6):
+            normals = rng.normal(size=(k, 3))
+            normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+            move = rng.normal(size=3) * 0.005
+            out = nearest_in_cone(move, normals)
+            assert np.all(normals @ out <= 1e-12)
+            np.testing.assert_allclose(out, _dykstra(move, normals, 5000), atol=2e-8)  # of a 5 mm step
+
+
+def test_a_ray_and_the_ceiling_leave_the_step_along_the_edge_they_share():
+    """The tool 2 mm inside the guard's band under the ceiling, something seen 4.8 cm away
+    40 degrees off straight down, the goal below and beyond: the step kept runs along the
+    line the two planes share. Projecting onto one plane after the other for 20 rounds
+    left 1e-7 m of motion towards one of them, and the layer stopped the tool instead."""
+    layer = SafetyLayer(workspace_guard=0.01, ray_shield=0.05)
+    ray = np.array([-0.64, 0.06, -0.76]) / np.linalg.norm([-0.64, 0.06, -0.76])
+    step = np.array([-0.00386, -0.00216, -0.00234])
+    out = layer.filter(np.r_[step, 0.0, 0.0, 0.0], np.array([0.0, 0.42, 0.488]), LOW, HIGH,
+                       np.array([0.048]), ray[None])[:3]
+    edge = np.cross(ray, Z) / np.linalg.norm(np.cross(ray, Z))
+    np.testing.assert_allclose(out, (step @ edge) * edge, atol=1e-15)
+    assert np.linalg.norm(out) > 0.002
 
 
 def test_a_known_travel_shorter_than_every_ray_lets_the_motion_through():
