@@ -90,20 +90,25 @@ def nearest_in_cone(move: np.ndarray, normals: np.ndarray, tolerance: float = 0.
     In three dimensions that point lies inside the cone (``move`` itself), on one of its
     faces (``move`` projected onto one plane), on one of its edges (projected onto the line
     two planes share) or at its apex, and it is the nearest of those candidates that lies in
-    the cone. Exact, where projecting onto one plane after another creeps towards it: a ray
-    and a bound 40 degrees apart left 1e-7 m of motion towards one of them after 20 rounds."""
-    if len(normals) == 0 or np.all(normals @ move <= tolerance):
+    the cone. A face is tried first: the cone lies within each half-space, so a plane that
+    ``move`` crosses, projected onto and found inside the cone, is the answer; the edges,
+    pairwise and costlier, only when none is. Exact, where projecting onto one plane after
+    another creeps towards the answer: a ray and a bound at an oblique angle left 1e-7 m of
+    motion towards one of them after 20 rounds."""
+    towards = normals @ move if len(normals) else np.zeros(0)
+    if np.all(towards <= tolerance):
         return move
     tolerance += 1e-9 * float(np.linalg.norm(move))  # the candidates' rounding
-    faces = move - (normals @ move)[:, None] * normals
+    for i in np.flatnonzero(towards > tolerance)[np.argsort(towards[towards > tolerance])]:
+        face = move - towards[i] * normals[i]
+        if np.all(normals @ face <= tolerance):
+            return face
     i, j = np.triu_indices(len(normals), k=1)
     lines = np.cross(normals[i], normals[j])
     size = np.linalg.norm(lines, axis=1)
     lines = lines[size > 1e-9] / size[size > 1e-9, None]
-    edges = (lines @ move)[:, None] * lines
-    candidates = np.concatenate([faces, edges, np.zeros((1, 3))])
-    inside = np.all(candidates @ normals.T <= tolerance, axis=1)
-    candidates = candidates[inside]
+    candidates = np.concatenate([(lines @ move)[:, None] * lines, np.zeros((1, 3))])
+    candidates = candidates[np.all(candidates @ normals.T <= tolerance, axis=1)]
     return candidates[np.argmin(np.linalg.norm(candidates - move, axis=1))]
 
 
