@@ -82,14 +82,14 @@ def test_nearest_in_cone_is_the_projection_dykstra_converges_to():
 
 
 def test_a_ray_and_the_ceiling_leave_the_step_along_the_edge_they_share():
-    """The tool 2 mm inside the guard's band under the ceiling, something seen 4.8 cm away
-    40 degrees off straight down, the goal below and beyond: the step kept runs along the
-    line the two planes share. Projecting onto one plane after the other for 20 rounds
-    left 1e-7 m of motion towards one of them, and the layer stopped the tool instead."""
+    """The tool just inside the guard's band under the ceiling, something seen 4.8 cm away
+    40 degrees off straight down, the goal below and beyond (a traced UR5 timeout): the step
+    kept runs along the line the two planes share. Projecting onto one plane after the other
+    left 2e-8 m of motion towards the ray after 20 rounds, and the layer stopped the tool."""
     layer = SafetyLayer(workspace_guard=0.01, ray_shield=0.05)
     ray = np.array([-0.64, 0.06, -0.76]) / np.linalg.norm([-0.64, 0.06, -0.76])
     step = np.array([-0.00386, -0.00216, -0.00234])
-    out = layer.filter(np.r_[step, 0.0, 0.0, 0.0], np.array([0.0, 0.42, 0.488]), LOW, HIGH,
+    out = layer.filter(np.r_[step, 0.0, 0.0, 0.0], np.array([0.0, 0.42, 0.4901]), LOW, HIGH,
                        np.array([0.048]), ray[None])[:3]
     edge = np.cross(ray, Z) / np.linalg.norm(np.cross(ray, Z))
     np.testing.assert_allclose(out, (step @ edge) * edge, atol=1e-15)
