@@ -8,7 +8,7 @@ import pytest
 from exp1_scenes import exp1_around_the_tool
 from rayreach.env import ReachEnv
 from rayreach.rewards import RewardWeights
-from rayreach.safety import ACTING_SAFETY, SafetyLayer, nearest_in_cone
+from rayreach.safety import ACTING_SAFETY, SafetyLayer, nearest_direction_in_cone, nearest_in_cone
 from rayreach.scenarios.schema import ObstacleSpec
 
 FAR = np.full(3, 0.4)
@@ -188,11 +188,81 @@ def test_slide_carries_the_held_tool_along_the_box_to_a_goal_beside_it():
     assert steps == 60 and not info["collision"] and info["distance"] < 0.02
 
 
+def test_a_held_goal_step_moves_the_tool_along_the_box_and_never_into_it():
+    """The goal lies straight behind the box, so the goal's own step is held as well as the
+    push. The shield alone holds the tool still; with the slide it steps a full step along
+    the box face every step and never touches the box. It goes back and forth about the
+    goal's side position: the rule keeps no memory of which way it went."""
+    still = _positions_pushing_into_a_box(SafetyLayer(workspace_guard=0.01, ray_shield=0.05))
+    assert np.ptp(still[-20:], axis=0).max() < 1e-3
+    moving = _positions_pushing_into_a_box(ACTING_SAFETY)
+    steps = np.linalg.norm(np.diff(moving[-20:], axis=0), axis=1)
+    assert np.all(steps > 0.004)
+
+
+def test_slide_steps_along_the_allowed_direction_nearest_the_goal_when_the_goal_step_is_held():
+    """Under the ceiling, with a fan of near rays ahead and below and the goal beyond them
+    (the traced UR5 timeouts): the goal's step projects to nothing, so the slide takes a
+    step as long along the allowed direction at the smallest angle to it."""
+    layer = SafetyLayer(workspace_guard=0.01, ray_shield=0.05, slide=0.1)
+    fan = np.array([[0.3, 0.0, -0.95], [0.3, 0.3, -0.9], [0.3, -0.3, -0.9], [0.7, 0.1, -0.7]])
+    fan /= np.linalg.norm(fan, axis=1, keepdims=True)
+    at_ceiling, distances = np.array([0.0, 0.5, 0.4901]), np.full(4, 0.03)
+    goal_step = np.array([0.0049, 0.0002, -0.001])
+    push = np.array([0.004, 0.0, 0.003, 0.0, 0.0, 0.0])
+    held = layer._apply(np.r_[goal_step, np.zeros(3)], at_ceiling, LOW, HIGH, distances, fan, None)
+    assert np.linalg.norm(held[:3]) < 1e-9
+    out = layer.filter(push, at_ceiling, LOW, HIGH, distances, fan, towards_goal=goal_step)[:3]
+    rules = np.vstack([fan, Z])
+    assert np.linalg.norm(out) == pytest.approx(np.linalg.norm(goal_step))
+    assert np.all(rules @ out <= 1e-12)
+    np.testing.assert_allclose(out, nearest_direction_in_cone(goal_step, rules) * np.linalg.norm(goal_step))
+
+
+def _positions_pushing_into_a_box(safety: SafetyLayer, steps: int = 60) -> np.ndarray:
+    env = exp1_around_the_tool([_box_behind], safety=safety)
+    try:
+        env.reset(seed=0)
+        positions = []
+        for _ in range(steps):
+            _, _, terminated, _, info = env.step(np.array([-1, 0, 0, 0, 0, 0], np.float32))
+            assert not terminated and not info["collision"]
+            positions.append(info["ee_position"])
+        return np.array(positions)
+    finally:
+        env.close()
+
+
+def test_nearest_direction_in_cone_matches_a_search_over_the_sphere():
+    """Against 200,000 directions spread over the sphere: the allowed one nearest the goal's
+    is as near as any of them (to the sphere's spacing), and allowed itself."""
+    n = 200_000
+    k = np.arange(n) + 0.5
+    polar, azimuth = np.arccos(1 - 2 * k / n), np.pi * (1 + 5 ** 0.5) * k
+    sphere = np.stack([np.sin(polar) * np.cos(azimuth), np.sin(polar) * np.sin(azimuth), np.cos(polar)], axis=1)
+    rng = np.random.default_rng(1)
+    for count in (1, 2, 3, 4, 6):
+        for _ in range(5):
+            normals = rng.normal(size=(count, 3))
+            normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+            goal = rng.normal(size=3)
+            way = nearest_direction_in_cone(goal, normals, 1e-12)
+            allowed = sphere[np.all(sphere @ normals.T <= 0.0, axis=1)]
+            if way is None:
+                assert len(allowed) == 0
+                continue
+            assert np.linalg.norm(way) == pytest.approx(1.0) and np.all(normals @ way <= 1e-9)
+            best = float((allowed @ goal).max()) / np.linalg.norm(goal)
+            assert way @ goal / np.linalg.norm(goal) == pytest.approx(best, abs=2e-2)
+            assert way @ goal / np.linalg.norm(goal) >= best - 1e-3
+
+
 def test_shielded_term_costs_each_held_step_and_nothing_before():
     """The tool starts 9 cm from the box; it runs free until a ray sees the box nearer than
     the 5 cm shield (the rays start around the flange, ahead of the tool point), and every
     step after is held whole: the term is the full weight and the tool does not move."""
-    steps, info = _push_into_a_box(ACTING_SAFETY, rewards=RewardWeights(shielded=-0.1))
+    held = SafetyLayer(workspace_guard=0.01, ray_shield=0.05)  # no slide: every push is held
+    steps, info = _push_into_a_box(held, rewards=RewardWeights(shielded=-0.1))
     shielded = np.array(info["shielded"])
     assert steps == 60 and not info["collision"]
     free = int(np.argmax(shielded < 0))

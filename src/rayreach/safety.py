@@ -33,7 +33,9 @@ class SafetyLayer:
     """When the rules leave less than this share of the commanded translation (a policy
     pushing straight into what it sees holds still until its step budget runs out), take the
     step towards the goal instead, through the same rules and without rotation: the tool
-    slides along what it sees towards the goal; 0: off."""
+    slides along what it sees towards the goal. When the rules hold that step too, take a
+    step as long along the allowed direction nearest the goal's, sideways or back if need
+    be, so the policy acts again from a new place; 0: off."""
 
     def __post_init__(self) -> None:
         for name in ("workspace_guard", "ray_shield", "slide"):
@@ -62,26 +64,75 @@ class SafetyLayer:
         (``nearest_in_cone``)."""
         rays = (ee_pos, low, high, ray_distances, ray_directions)
         out = self._apply(np.array(delta, dtype=float), *rays, travel)
-        if (self.slide > 0 and towards_goal is not None
-                and np.linalg.norm(out[:3]) < self.slide * np.linalg.norm(delta[:3])):
-            return self._apply(np.concatenate([towards_goal, np.zeros(3)]), *rays, None)
+        least = self.slide * np.linalg.norm(delta[:3])
+        if self.slide > 0 and towards_goal is not None and np.linalg.norm(out[:3]) < least:
+            out = self._apply(np.concatenate([towards_goal, np.zeros(3)]), *rays, None)
+            if np.linalg.norm(out[:3]) < least:
+                size = float(np.linalg.norm(towards_goal))
+                way = nearest_direction_in_cone(towards_goal, self._normals(size, *rays, None), self.TOLERANCE)
+                if way is not None:
+                    out[:3] = way * size
         return out
+
+    def _normals(self, reach: float, ee_pos: np.ndarray, low: np.ndarray, high: np.ndarray,
+                 ray_distances: np.ndarray, ray_directions: np.ndarray, travel: float | None) -> np.ndarray:
+        """The rules for a step of length ``reach`` as unit normals of the half-spaces
+        {m : normal @ m <= 0}: every near ray, and every bound within the step of its band."""
+        shielded = self.ray_shield > 0 and (travel is None or travel >= ray_distances.min(initial=np.inf))
+        near = np.flatnonzero(ray_distances < self.ray_shield) if shielded else np.zeros(0, int)
+        normals = [ray_directions[near].reshape(-1, 3)]
+        if self.workspace_guard > 0:
+            axes = np.eye(3)
+            normals += [axes[ee_pos + reach > high - self.workspace_guard],
+                        -axes[ee_pos - reach < low + self.workspace_guard]]
+        return np.concatenate(normals)
 
     def _apply(self, out: np.ndarray, ee_pos: np.ndarray, low: np.ndarray, high: np.ndarray,
                ray_distances: np.ndarray, ray_directions: np.ndarray, travel: float | None) -> np.ndarray:
         """``filter`` without the slide; changes ``out`` in place and returns it."""
         shielded = self.ray_shield > 0 and (travel is None or travel >= ray_distances.min(initial=np.inf))
-        near = np.flatnonzero(ray_distances < self.ray_shield) if shielded else np.zeros(0, int)
-        if near.size:
+        if shielded and np.any(ray_distances < self.ray_shield):
             out[3:] = 0.0
-        normals = [ray_directions[near]]
-        if self.workspace_guard > 0:  # a bound within a step's length of its band: no motion towards it
-            reach = np.linalg.norm(out[:3])
-            axes = np.eye(3)
-            normals += [axes[ee_pos + reach > high - self.workspace_guard],
-                        -axes[ee_pos - reach < low + self.workspace_guard]]
-        out[:3] = nearest_in_cone(out[:3], np.concatenate(normals), self.TOLERANCE)
+        normals = self._normals(float(np.linalg.norm(out[:3])), ee_pos, low, high, ray_distances, ray_directions, travel)
+        out[:3] = nearest_in_cone(out[:3], normals, self.TOLERANCE)
         return out
+
+
+TIE = 1e-3
+"""Cosine difference under which two allowed directions count as equally near the goal's
+(``nearest_direction_in_cone``)."""
+
+
+def _edge_lines(normals: np.ndarray) -> np.ndarray:
+    """Unit directions of the lines that pairs of the planes share (parallel pairs skipped)."""
+    i, j = np.triu_indices(len(normals), k=1)
+    lines = np.cross(normals[i], normals[j])
+    size = np.linalg.norm(lines, axis=1)
+    return lines[size > 1e-9] / size[size > 1e-9, None]
+
+
+def nearest_direction_in_cone(direction: np.ndarray, normals: np.ndarray, tolerance: float = 0.0) -> np.ndarray | None:
+    """The unit vector at the smallest angle to ``direction`` that goes towards none of the
+    unit ``normals``; None when the cone {m : normals @ m <= 0} is its apex alone.
+
+    The angle is smallest at ``direction`` itself, on a face (``direction`` projected onto
+    its plane) or on an edge (either way along it); the best of those inside the cone. Where
+    ``direction`` is inside the cone's polar, every allowed direction leads away from it and
+    this is the one that leads away least. Near ties (within ``TIE``) go to the left of
+    ``direction`` about the world's z axis: a tool held square to a wall then keeps going
+    one way along it rather than dithering from side to side."""
+    g = direction / np.linalg.norm(direction)
+    faces = g - (normals @ g)[:, None] * normals
+    size = np.linalg.norm(faces, axis=1)
+    faces = faces[size > 1e-9] / size[size > 1e-9, None]
+    lines = _edge_lines(normals)
+    candidates = np.concatenate([g[None], faces, lines, -lines])
+    candidates = candidates[np.all(candidates @ normals.T <= tolerance + 1e-12, axis=1)]  # + rounding
+    if not len(candidates):
+        return None
+    left = np.cross([0.0, 0.0, 1.0], g)
+    left = left / np.linalg.norm(left) if np.linalg.norm(left) > 1e-9 else np.array([1.0, 0.0, 0.0])
+    return candidates[np.argmax(candidates @ g + TIE * (candidates @ left))]
 
 
 def nearest_in_cone(move: np.ndarray, normals: np.ndarray, tolerance: float = 0.0) -> np.ndarray:
@@ -104,10 +155,7 @@ def nearest_in_cone(move: np.ndarray, normals: np.ndarray, tolerance: float = 0.
         face = move - towards[i] * normals[i]
         if np.all(normals @ face <= tolerance):
             return face
-    i, j = np.triu_indices(len(normals), k=1)
-    lines = np.cross(normals[i], normals[j])
-    size = np.linalg.norm(lines, axis=1)
-    lines = lines[size > 1e-9] / size[size > 1e-9, None]
+    lines = _edge_lines(normals)
     candidates = np.concatenate([(lines @ move)[:, None] * lines, np.zeros((1, 3))])
     candidates = candidates[np.all(candidates @ normals.T <= tolerance, axis=1)]
     return candidates[np.argmin(np.linalg.norm(candidates - move, axis=1))]
