@@ -67,8 +67,8 @@ class SafetyLayer:
         least = self.slide * np.linalg.norm(delta[:3])
         if self.slide > 0 and towards_goal is not None and np.linalg.norm(out[:3]) < least:
             out = self._apply(np.concatenate([towards_goal, np.zeros(3)]), *rays, None)
-            if np.linalg.norm(out[:3]) < least:
-                size = float(np.linalg.norm(towards_goal))
+            size = float(np.linalg.norm(towards_goal))
+            if np.linalg.norm(out[:3]) < least and size > 0:
                 way = nearest_direction_in_cone(towards_goal, self._normals(size, *rays, None), self.TOLERANCE)
                 if way is not None:
                     out[:3] = way * size
@@ -118,9 +118,9 @@ def nearest_direction_in_cone(direction: np.ndarray, normals: np.ndarray, tolera
     The angle is smallest at ``direction`` itself, on a face (``direction`` projected onto
     its plane) or on an edge (either way along it); the best of those inside the cone. Where
     ``direction`` is inside the cone's polar, every allowed direction leads away from it and
-    this is the one that leads away least. Near ties (within ``TIE``) go to the left of
-    ``direction`` about the world's z axis: a tool held square to a wall then keeps going
-    one way along it rather than dithering from side to side."""
+    this is the one that leads away least. Near ties (within ``TIE``; a goal straight behind
+    a wall) go to the left of ``direction`` about the world's z axis, so that the choice does
+    not hang on rounding."""
     g = direction / np.linalg.norm(direction)
     faces = g - (normals @ g)[:, None] * normals
     size = np.linalg.norm(faces, axis=1)
