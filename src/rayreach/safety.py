@@ -74,12 +74,16 @@ class SafetyLayer:
                     out[:3] = way * size
         return out
 
+    def _shields(self, ray_distances: np.ndarray, travel: float | None) -> bool:
+        """Whether the shield acts: it is on, and the motion's ``travel`` (when known) reaches
+        as far as the nearest thing a ray sees."""
+        return self.ray_shield > 0 and (travel is None or travel >= ray_distances.min(initial=np.inf))
+
     def _normals(self, reach: float, ee_pos: np.ndarray, low: np.ndarray, high: np.ndarray,
                  ray_distances: np.ndarray, ray_directions: np.ndarray, travel: float | None) -> np.ndarray:
         """The rules for a step of length ``reach`` as unit normals of the half-spaces
         {m : normal @ m <= 0}: every near ray, and every bound within the step of its band."""
-        shielded = self.ray_shield > 0 and (travel is None or travel >= ray_distances.min(initial=np.inf))
-        near = np.flatnonzero(ray_distances < self.ray_shield) if shielded else np.zeros(0, int)
+        near = np.flatnonzero(ray_distances < self.ray_shield) if self._shields(ray_distances, travel) else np.zeros(0, int)
         normals = [ray_directions[near].reshape(-1, 3)]
         if self.workspace_guard > 0:
             axes = np.eye(3)
@@ -90,8 +94,7 @@ class SafetyLayer:
     def _apply(self, out: np.ndarray, ee_pos: np.ndarray, low: np.ndarray, high: np.ndarray,
                ray_distances: np.ndarray, ray_directions: np.ndarray, travel: float | None) -> np.ndarray:
         """``filter`` without the slide; changes ``out`` in place and returns it."""
-        shielded = self.ray_shield > 0 and (travel is None or travel >= ray_distances.min(initial=np.inf))
-        if shielded and np.any(ray_distances < self.ray_shield):
+        if self._shields(ray_distances, travel) and np.any(ray_distances < self.ray_shield):
             out[3:] = 0.0
         normals = self._normals(float(np.linalg.norm(out[:3])), ee_pos, low, high, ray_distances, ray_directions, travel)
         out[:3] = nearest_in_cone(out[:3], normals, self.TOLERANCE)
