@@ -83,7 +83,8 @@ class SafetyLayer:
                  ray_distances: np.ndarray, ray_directions: np.ndarray, travel: float | None) -> np.ndarray:
         """The rules for a step of length ``reach`` as unit normals of the half-spaces
         {m : normal @ m <= 0}: every near ray, and every bound within the step of its band."""
-        near = np.flatnonzero(ray_distances < self.ray_shield) if self._shields(ray_distances, travel) else np.zeros(0, int)
+        shielded = self._shields(ray_distances, travel)
+        near = np.flatnonzero(ray_distances < self.ray_shield) if shielded else np.zeros(0, int)
         normals = [ray_directions[near].reshape(-1, 3)]
         if self.workspace_guard > 0:
             axes = np.eye(3)
@@ -96,7 +97,8 @@ class SafetyLayer:
         """``filter`` without the slide; changes ``out`` in place and returns it."""
         if self._shields(ray_distances, travel) and np.any(ray_distances < self.ray_shield):
             out[3:] = 0.0
-        normals = self._normals(float(np.linalg.norm(out[:3])), ee_pos, low, high, ray_distances, ray_directions, travel)
+        reach = float(np.linalg.norm(out[:3]))
+        normals = self._normals(reach, ee_pos, low, high, ray_distances, ray_directions, travel)
         out[:3] = nearest_in_cone(out[:3], normals, self.TOLERANCE)
         return out
 
