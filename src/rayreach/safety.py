@@ -66,10 +66,12 @@ class SafetyLayer:
         out = self._apply(np.array(delta, dtype=float), *rays, travel)
         least = self.slide * np.linalg.norm(delta[:3])
         if self.slide > 0 and towards_goal is not None and np.linalg.norm(out[:3]) < least:
-            out = self._apply(np.concatenate([towards_goal, np.zeros(3)]), *rays, None)
             size = float(np.linalg.norm(towards_goal))
+            normals = self._normals(size, *rays, None)  # the rules for the goal's step, once for both tries
+            out = np.zeros(6)
+            out[:3] = nearest_in_cone(np.asarray(towards_goal, dtype=float), normals, self.TOLERANCE)
             if np.linalg.norm(out[:3]) < least and size > 0:
-                way = nearest_direction_in_cone(towards_goal, self._normals(size, *rays, None), self.TOLERANCE)
+                way = nearest_direction_in_cone(towards_goal, normals, self.TOLERANCE)
                 if way is not None:
                     out[:3] = way * size
         return out
