@@ -35,6 +35,38 @@ def test_parse_experiments_accepts_ranges_lists_and_names():
         parse_experiments("9")
 
 
+def test_random_experiment_names_carry_their_obstacle_count():
+    assert runner.random_experiment("kr16") == "random-kr16"
+    assert runner.random_experiment("kr16", 1) == "random-kr16:1"
+    assert runner.parse_random("random-kr16", 3) == ("kr16", 3)
+    assert runner.parse_random("random-kr16:1", 3) == ("kr16", 1)
+    with pytest.raises(ValueError, match="whole number"):
+        runner.parse_random("random-ur5:-1", 3)
+    with pytest.raises(ValueError, match="known: kr16, ur5"):
+        EvaluationConfig(("random-abb:2",), ("drl",))
+
+
+def test_a_random_experiment_with_a_count_plays_the_rollout_worlds_of_that_count():
+    """``random-ur5:2`` run r is rollout's world of seed 1,000,000 + r with 2 obstacles,
+    so the two commands measure the same worlds."""
+    from rayreach.env import ReachEnv
+
+    worker = runner.Worker(EvaluationConfig(("random-ur5:2",), ("drl",), runs=1, workers=1))
+    env = ReachEnv(robot="ur5", scenario="random")
+    try:
+        env.set_n_obstacles(2)
+        ex = worker.executor("random-ur5:2")
+        assert ex.env.n_obstacles == 2 and worker.executor("random-ur5").env.n_obstacles == 3
+        for run in range(3):
+            ex.reset(runner.run_seed("random-ur5:2", run))
+            env.reset(seed=1_000_000 + run)
+            assert [o.name for o in ex.env.scenario.obstacles] == [o.name for o in env.scenario.obstacles]
+            np.testing.assert_array_equal(ex.env.goals, env.goals)
+    finally:
+        worker.close()
+        env.close()
+
+
 def test_unknown_planner_is_refused_with_the_valid_names():
     with pytest.raises(ValueError, match="ompl-rrtconnect"):
         EvaluationConfig(("exp1",), ("prm",))
@@ -161,3 +193,10 @@ def test_box_edges_follow_pybullets_pose_of_a_rotated_box():
     assert np.all(nearest.min(axis=1) < 1e-6) and len(set(nearest.argmin(axis=1))) == 8
     lengths = sorted(round(float(np.linalg.norm(a - b)), 9) for a, b in edges)
     assert lengths == sorted([2 * h for h in half for _ in range(4)])
+
+
+def test_evaluate_refuses_an_obstacle_count_outside_the_random_suite(tmp_path, capsys):
+    from rayreach.cli import main
+
+    assert main(["evaluate", "--experiments", "1", "--obstacles", "2", "--out", str(tmp_path)]) == 2
+    assert "--suite random" in capsys.readouterr().err

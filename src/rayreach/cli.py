@@ -66,6 +66,9 @@ def build_parser() -> argparse.ArgumentParser:
                     help="held-out random worlds instead of --experiments (seeds disjoint from training)")
     ev.add_argument("--robot", default="ur5,kr16", help="robots of --suite random (comma-separated)")
     ev.add_argument("--episodes", type=int, default=None, help="runs per robot of --suite random")
+    ev.add_argument("--obstacles", type=int, default=None,
+                    help="obstacles per world of --suite random (default 3, the held-out suite; stored as "
+                         "experiment random-ROBOT:N otherwise)")
     ev.add_argument("--out", required=True, help="results directory, e.g. results/paper")
     ev.add_argument("--workers", type=int, default=None, help="worker processes (default: CPU cores)")
     ev.add_argument("--time-limit", type=float, default=30.0, help="planning time limit per query, s")
@@ -263,16 +266,19 @@ def _bench(args: argparse.Namespace) -> int:
 def _evaluate(args: argparse.Namespace) -> int:
     from rayreach.evaluate import EvaluationConfig, evaluate, parse_experiments, write_report
     from rayreach.evaluate.report import summarise
-    from rayreach.evaluate.runner import RANDOM_PREFIX
+    from rayreach.evaluate.runner import random_experiment
 
     planners = tuple(p.strip() for p in args.planners.split(",") if p.strip())
     runs = args.runs
     if args.suite == "random":
-        experiments = tuple(RANDOM_PREFIX + r.strip() for r in args.robot.split(",") if r.strip())
+        obstacles = None if args.obstacles == EvaluationConfig.obstacles else args.obstacles
+        experiments = tuple(random_experiment(r.strip(), obstacles) for r in args.robot.split(",") if r.strip())
         if args.planners == EVAL_PLANNERS:
             planners = ("drl",)
         runs = args.episodes or 500
     else:
+        if args.obstacles is not None:
+            raise ValueError("--obstacles applies to --suite random (the experiments' scenes are fixed)")
         experiments = parse_experiments(args.experiments)
     models = tuple((robot, path) for robot, path in (("ur5", args.model_ur5), ("kr16", args.model_kr16)) if path)
     config = EvaluationConfig(experiments, planners, runs=runs, time_limit=args.time_limit,

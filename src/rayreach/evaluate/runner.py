@@ -16,17 +16,35 @@ from tqdm import tqdm
 from rayreach.evaluate.store import ResultsStore
 from rayreach.execution import ExecutionConfig, Executor, RunRecord
 from rayreach.planners import PLANNER_NAMES, GlobalPlanner, ReactivePlanner, make_planner
+from rayreach.robots import get_robot
 from rayreach.rollout import EVAL_SEED_OFFSET
 from rayreach.scenarios import EXPERIMENTS
 
 RANDOM_PREFIX = "random-"
-"""Experiment names ``random-ur5`` / ``random-kr16``: held-out random worlds of that robot."""
+"""Experiment names ``random-ur5`` / ``random-kr16``: held-out random worlds of that robot,
+with ``EvaluationConfig.obstacles`` each; ``random-ur5:2``: with 2 obstacles each."""
+
+
+def random_experiment(robot: str, obstacles: int | None = None) -> str:
+    """The experiment name of ``robot``'s random worlds (``obstacles`` None: the config's count)."""
+    return f"{RANDOM_PREFIX}{robot}" + ("" if obstacles is None else f":{obstacles}")
+
+
+def parse_random(experiment: str, default_obstacles: int) -> tuple[str, int]:
+    """(robot, obstacles per world) of a ``random-ROBOT[:N]`` experiment name."""
+    robot, _, count = experiment[len(RANDOM_PREFIX):].partition(":")
+    if not count:
+        return robot, default_obstacles
+    if not count.isdigit():
+        raise ValueError(f"'{experiment}': the obstacle count after ':' must be a whole number, e.g. random-ur5:2")
+    return robot, int(count)
 
 
 @dataclass(frozen=True)
 class EvaluationConfig:
     experiments: tuple[str, ...]
-    """``exp1``..``exp7``, ``random-ur5``, ``random-kr16`` or scene files."""
+    """``exp1``..``exp7``, ``random-ur5``, ``random-kr16`` (``random-ur5:2``: 2 obstacles per
+    world) or scene files."""
     planners: tuple[str, ...]
     runs: int = 30
     workers: int = field(default_factory=lambda: os.cpu_count() or 1)
@@ -47,6 +65,9 @@ class EvaluationConfig:
             raise ValueError(f"unknown planner(s) {unknown}; valid: {', '.join(PLANNER_NAMES)}")
         if self.runs < 1 or self.workers < 1:
             raise ValueError(f"runs and workers must be >= 1, got {self.runs} and {self.workers}")
+        for experiment in self.experiments:  # here, not as 500 crash records from the workers
+            if experiment.startswith(RANDOM_PREFIX):
+                get_robot(parse_random(experiment, self.obstacles)[0])
 
 
 def parse_experiments(text: str) -> tuple[str, ...]:
@@ -101,8 +122,9 @@ class Worker:
         if experiment not in self.executors:
             exec_config = ExecutionConfig(replan=self.config.replan)
             if experiment.startswith(RANDOM_PREFIX):
-                ex = Executor("random", robot=experiment[len(RANDOM_PREFIX):], config=exec_config)
-                ex.env.set_n_obstacles(self.config.obstacles)
+                robot, obstacles = parse_random(experiment, self.config.obstacles)
+                ex = Executor("random", robot=robot, config=exec_config)
+                ex.env.set_n_obstacles(obstacles)
             else:
                 ex = Executor(experiment, config=exec_config)
             self.executors[experiment] = ex
