@@ -14,7 +14,7 @@ from rayreach.env import ReachEnv
 from rayreach.kinematics import IKParams
 from rayreach.scenarios import EXPERIMENTS, ScenarioError, get_scenario
 from rayreach.scenarios.feasibility import goal_configuration, solve_start
-from rayreach.scenarios.random_world import RandomWorldConfig, RandomWorlds, shelf_boxes
+from rayreach.scenarios.random_world import KINDS, RandomWorldConfig, RandomWorlds, shelf_boxes, world_kinds
 
 ROBOT_OF = {
     "exp1": "ur5",
@@ -351,20 +351,13 @@ def _check_random_world(env):
             assert signed_distance(obs, start)[0] > 0, f"start inside {obs.name}"
 
 
-def _obstacle_units(names):
-    """Obstacles as the curriculum counts them: a shelf's six boxes and a goal slot's two
-    plates are one each."""
-    return len({"shelf" if n.startswith("shelf_") else n.rsplit("_", 1)[0] if n.startswith("goal_slot_") else n
-                for n in names})
-
-
 def test_random_worlds_ur5_are_feasible(ur5_random_env):
     env = ur5_random_env
     env.set_n_obstacles(3)
     for seed in range(20):
         env.reset(seed=seed)
         _check_random_world(env)
-        assert _obstacle_units([o.name for o in env.scenario.obstacles]) == 3
+        assert len(world_kinds(env.scenario)) == 3
 
 
 def test_random_world_obstacle_count_follows_n_obstacles_ur5(ur5_random_env):
@@ -374,7 +367,7 @@ def test_random_world_obstacle_count_follows_n_obstacles_ur5(ur5_random_env):
             env.set_n_obstacles(n)
             for seed in range(5):
                 env.reset(seed=100 + seed)
-                assert _obstacle_units([o.name for o in env.scenario.obstacles]) == n
+                assert len(world_kinds(env.scenario)) == n
                 assert len(env.scene.obstacles) == len(env.scenario.obstacles)
                 _check_random_world(env)
     finally:
@@ -394,7 +387,7 @@ def test_random_worlds_kr16_count_a_shelf_as_one_obstacle():
             _check_random_world(env)
             names = [o.name for o in env.scenario.obstacles]
             assert len([n for n in names if n.startswith("shelf_")]) in (0, 6)
-            units = _obstacle_units(names)
+            units = len(world_kinds(env.scenario))
             assert units == 3, f"seed {seed}: {units} obstacles (shelf counted once), asked for 3: {names}"
             board = next((o for o in env.scenario.obstacles if o.name == "shelf_board_0"), None)
             if board is not None:  # the tool starts before the open face, as in exp4..exp7
@@ -408,6 +401,27 @@ def test_random_worlds_kr16_count_a_shelf_as_one_obstacle():
 
 def _worlds_of_one_kind(env, kind):
     return RandomWorlds(env.kin, env.scene, RandomWorldConfig(kinds=(kind,)))
+
+
+@pytest.mark.parametrize("robot", ["ur5", "kr16"])
+def test_world_kinds_names_each_drawn_kind_once(robot, ur5_random_env):
+    """A world drawn from one kind names it once per draw (a slot's two plates and a shelf's
+    six boxes are one draw; a second shelf draw is replaced, here by nothing)."""
+    env = ur5_random_env if robot == "ur5" else ReachEnv(robot="kr16")
+    rng = np.random.default_rng(5)
+    try:
+        for kind in dict.fromkeys(env.spec_robot.training_kinds):
+            scenario, _q = _worlds_of_one_kind(env, kind).sample(rng, 2)
+            assert world_kinds(scenario) == (["shelf"] if kind == "shelf" else [kind, kind]), kind
+    finally:
+        if robot == "kr16":
+            env.close()
+    assert set(KINDS) >= set(env.spec_robot.training_kinds)
+
+
+def test_world_kinds_refuses_an_obstacle_no_random_world_draws():
+    with pytest.raises(ValueError, match="goal_slot"):
+        world_kinds(get_scenario("exp1"))
 
 
 def test_goal_slot_puts_the_goal_between_two_parallel_plates(ur5_random_env):

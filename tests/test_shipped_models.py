@@ -98,3 +98,36 @@ def test_drl_alone_runs_the_policy_without_the_acting_layers_and_restores_them()
     np.testing.assert_allclose(record.ee_path, np.asarray(path), atol=1e-9)
     assert again.config == _shipped_run("ur5", "exp1")[1].config
     np.testing.assert_allclose(again.ee_path, _shipped_run("ur5", "exp1")[1].ee_path, atol=1e-9)
+
+
+def test_rollout_counts_outcomes_per_world_kind():
+    """``rollout`` on random worlds: the outcomes add up to the episodes, and each kind's
+    counts are those of the worlds that drew it (the same worlds, replayed one by one)."""
+    from rayreach.env import episode_outcome
+    from rayreach.policy import load_policy
+    from rayreach.rollout import EVAL_SEED_OFFSET, rollout
+    from rayreach.safety import ACTING_SAFETY
+    from rayreach.scenarios.random_world import world_kinds
+
+    summary = rollout(MODELS_DIR / "kr16.zip", "random", episodes=4, progress=False)
+    assert sum(summary.outcomes.values()) == 4 and summary.outcomes["success"] == summary.successes
+    policy = load_policy(MODELS_DIR / "kr16.zip")
+    env = ReachEnv(robot="kr16", scenario="random", goal_tolerance=0.01, safety=ACTING_SAFETY,
+                   final_approach=FinalApproach())
+    env.set_n_obstacles(policy.meta["state"]["obstacles"]["count"])
+    expected: dict[str, dict[str, int]] = {}
+    try:
+        for episode in range(4):
+            obs, _ = env.reset(seed=EVAL_SEED_OFFSET + episode)
+            done = False
+            while not done:
+                obs, _, terminated, truncated, info = env.step(policy.act(obs))
+                done = terminated or truncated
+            for kind in world_kinds(env.scenario):
+                counts = expected.setdefault(kind, {"episodes": 0, "success": 0, "collision": 0,
+                                                    "out_of_bounds": 0, "timeout": 0})
+                counts["episodes"] += 1
+                counts[episode_outcome(info)] += 1
+    finally:
+        env.close()
+    assert summary.by_kind == dict(sorted(expected.items()))

@@ -392,6 +392,11 @@ def _rollout(args: argparse.Namespace, scenario: str) -> int:
     print(f"{scenario}: {summary.episodes} episodes ({mode}), success {summary.success_rate:.1%}, "
           f"collisions {summary.collision_rate:.1%}, mean path {summary.path_length_mean:.3f} m, "
           f"mean steps {summary.steps_mean:.0f}")
+    print("outcomes: " + ", ".join(f"{k.replace('_', ' ')} {v}" for k, v in summary.outcomes.items()))
+    for kind, counts in summary.by_kind.items():  # random worlds: which kinds of world fail
+        n = counts["episodes"]
+        print(f"  {kind:>13}: {n:4d} worlds, " + ", ".join(
+            f"{k.replace('_', ' ')} {counts[k] / n:.0%}" for k in counts if k != "episodes"))
     return 0
 
 

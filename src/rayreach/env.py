@@ -108,6 +108,17 @@ class EnvConfig:
             raise ValueError(f"control_period must be positive, got {self.control_period}")
 
 
+OUTCOMES = ("success", "collision", "out_of_bounds", "timeout")
+"""How an episode can end (``episode_outcome``)."""
+
+
+def episode_outcome(info: dict[str, Any]) -> str:
+    """One of ``OUTCOMES`` from an episode's last ``info`` (a goal reached in contact is a
+    collision; ``timeout``: the step budget ran out)."""
+    return ("success" if info["is_success"] else "collision" if info["collision"]
+            else "out_of_bounds" if info["out_of_bounds"] else "timeout")
+
+
 def observation_space(spec: RobotSpec, workspace_size: np.ndarray) -> gym.spaces.Box:
     """Finite bounds: joint limits; the goal offset and distance within the workspace (plus
     the one step that may leave it); Euler angles; ray fractions in [0, 1]."""

@@ -20,7 +20,7 @@ from typing import Any, Iterator
 
 import numpy as np
 
-from rayreach.env import ReachEnv
+from rayreach.env import ReachEnv, episode_outcome
 from rayreach.kinematics import Kinematics
 from rayreach.planners import GlobalPlanner, PlanResult, ReactivePlanner, Status
 from rayreach.planners.collision import CollisionChecker
@@ -222,8 +222,7 @@ class Executor:
             ee.append(info["ee_position"])
             joints.append(env.q.copy())
             done = terminated or truncated
-        outcome = ("success" if info["is_success"] else "collision" if info["collision"]
-                   else "out of bounds" if info["out_of_bounds"] else "timeout")
+        outcome = episode_outcome(info).replace("_", " ")
         ee_path = np.asarray(ee)
         length = polyline_length(ee_path)
         return self._record(planner, seed, config={**planner.config(), **self._acting()},

@@ -8,10 +8,11 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from rayreach.env import ReachEnv
+from rayreach.env import OUTCOMES, ReachEnv, episode_outcome
 from rayreach.policy import FinalApproach, load_policy
 from rayreach.safety import ACTING_SAFETY, SafetyLayer
 from rayreach.scenarios import RANDOM
+from rayreach.scenarios.random_world import world_kinds
 
 EVAL_SEED_OFFSET = 1_000_000
 """Random-world rollouts draw seeds from here on; training uses seeds below it."""
@@ -30,6 +31,11 @@ class RolloutSummary:
     deterministic: bool
     final_approach: bool
     safety: dict[str, float]
+    outcomes: dict[str, int] = field(default_factory=dict)
+    """Episodes per outcome: success, collision, out_of_bounds, timeout."""
+    by_kind: dict[str, dict[str, int]] = field(default_factory=dict)
+    """Random worlds: per obstacle kind (``random_world.KINDS``), the episodes whose world drew
+    it and their outcomes; a world with two kinds counts for both."""
     per_episode: list[dict] = field(default_factory=list)
 
     def to_dict(self, with_episodes: bool = False) -> dict:
@@ -37,6 +43,10 @@ class RolloutSummary:
         if not with_episodes:
             data.pop("per_episode")
         return {k: (None if isinstance(v, float) and v != v else v) for k, v in data.items()}  # NaN -> null
+
+
+def _count(records: list[dict]) -> dict[str, int]:
+    return {o: sum(r["outcome"] == o for r in records) for o in OUTCOMES}
 
 
 def rollout(
@@ -72,8 +82,9 @@ def rollout(
                 done = terminated or truncated
             length = float(np.linalg.norm(np.diff(np.asarray(path), axis=0), axis=1).sum())
             records.append({"success": bool(info["is_success"]), "collision": bool(info["collision"]),
-                            "out_of_bounds": bool(info["out_of_bounds"]), "steps": len(path) - 1,
-                            "path_length": length})
+                            "out_of_bounds": bool(info["out_of_bounds"]), "outcome": episode_outcome(info),
+                            "steps": len(path) - 1, "path_length": length,
+                            "kinds": world_kinds(env.scenario) if scenario == RANDOM else []})
     finally:
         env.close()
     successes = sum(r["success"] for r in records)
@@ -90,5 +101,9 @@ def rollout(
         deterministic=deterministic,
         final_approach=final_approach is not None,
         safety=asdict(safety),
+        outcomes=_count(records),
+        by_kind={kind: {"episodes": sum(kind in r["kinds"] for r in records),
+                        **_count([r for r in records if kind in r["kinds"]])}
+                 for kind in sorted({k for r in records for k in r["kinds"]})},
         per_episode=records,
     )

@@ -26,6 +26,23 @@ goal; goal_slot: two parallel upright plates either side of the goal (as in exp2
 listed twice in a robot's ``training_kinds`` is drawn twice as often."""
 
 
+def world_kinds(scenario: Scenario) -> list[str]:
+    """The kind (``KINDS``) of each obstacle a random world drew, in drawing order, read from
+    the names this module gives its obstacles: a goal slot's two plates and a shelf's boards
+    and walls count once. For telling which kinds of world a policy fails in."""
+    kinds, seen = [], set()
+    for obstacle in scenario.obstacles:
+        name = obstacle.name or ""
+        kind = max((k for k in KINDS if name.startswith(k + "_")), key=len, default=None)
+        if kind is None:
+            raise ValueError(f"obstacle '{name}' is not one a random world draws (kinds: {', '.join(KINDS)})")
+        group = kind if kind == "shelf" else name.rsplit("_", 1)[0] if kind == "goal_slot" else name
+        if group not in seen:
+            seen.add(group)
+            kinds.append(kind)
+    return kinds
+
+
 SHELF_DEPTH = 0.3
 """Depth of a shelf along y, m (exp4..exp7)."""
 
