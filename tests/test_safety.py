@@ -8,7 +8,7 @@ import pytest
 from exp1_scenes import exp1_around_the_tool
 from rayreach.env import ReachEnv
 from rayreach.rewards import RewardWeights
-from rayreach.safety import ACTING_SAFETY, SafetyLayer, nearest_direction_in_cone, nearest_in_cone
+from rayreach.safety import ACTING_SAFETY, HitMemory, SafetyLayer, nearest_direction_in_cone, nearest_in_cone
 from rayreach.scenarios.schema import ObstacleSpec
 
 FAR = np.full(3, 0.4)
@@ -147,6 +147,58 @@ def test_negative_settings_are_refused():
         SafetyLayer(slide=-0.1)
     with pytest.raises(ValueError, match="slide is a share"):
         SafetyLayer(slide=1.5)
+
+
+def test_hit_memory_gives_back_what_a_ray_saw_from_where_its_origin_is_now():
+    """A ray from 2 cm beside the tool point saw a point 3 cm ahead of it; the tool then moved
+    1 cm and the ray sees nothing. The memory returns the point as a ray from the origin's
+    new place: 4 cm long here, as plain geometry says."""
+    memory = HitMemory(steps=2)
+    origin, direction = np.array([[0.02, 0.0, 0.0]]), np.array([[1.0, 0.0, 0.0]])
+    far = np.array([0.4])
+    distances, directions = memory.rays(np.zeros(3), origin, direction, np.array([0.03]), reach=0.05)
+    assert distances.tolist() == [0.03]  # nothing remembered yet
+    moved = np.array([-0.01, 0.0, 0.0])
+    distances, directions = memory.rays(moved, origin + moved, direction, far, reach=0.05)
+    np.testing.assert_allclose(distances, [0.4, 0.04])
+    np.testing.assert_allclose(directions, [[1, 0, 0], [1, 0, 0]])
+    sideways = np.array([0.0, 0.03, 0.0])  # the point is now sqrt(0.03^2 + 0.03^2) from the origin
+    distances, directions = memory.rays(sideways, origin + sideways, direction, far, reach=0.05)
+    np.testing.assert_allclose(distances, [0.4, np.hypot(0.03, 0.03)])
+    np.testing.assert_allclose(directions[1], np.array([1.0, -1.0, 0.0]) / np.sqrt(2))
+    distances, _ = memory.rays(sideways, origin + sideways, direction, far, reach=0.05)
+    assert distances.tolist() == [0.4]  # two steps on, forgotten
+    assert HitMemory(steps=0).rays(np.zeros(3), origin, direction, np.array([0.03]), 0.05)[0].tolist() == [0.03]
+
+
+def test_hit_memory_keeps_only_hits_a_step_could_bring_within_the_shield():
+    memory = HitMemory(steps=5)
+    origins, directions = np.zeros((2, 3)), np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    memory.rays(np.zeros(3), origins, directions, np.array([0.05 + HitMemory.MARGIN - 1e-4, 0.2]), reach=0.05)
+    closer = np.array([HitMemory.MARGIN, 0.0, 0.0])  # the first point is now just inside 5 cm
+    distances, _ = memory.rays(closer, origins + closer, directions, np.full(2, 0.4), reach=0.05)
+    assert len(distances) == 3 and distances[2] == pytest.approx(0.05 - 1e-4)
+
+
+def test_hit_memory_leaves_what_the_rays_still_see_to_them():
+    """The same point seen again (within ``LOST``) is the current rays' to hold off; only a
+    point no ray hits any more comes back from the memory."""
+    memory = HitMemory(steps=3)
+    origin, direction = np.zeros((1, 3)), np.array([[1.0, 0.0, 0.0]])
+    memory.rays(np.zeros(3), origin, direction, np.array([0.03]), reach=0.05)
+    step = np.array([0.0, HitMemory.LOST / 2, 0.0])  # the ray now hits the face half LOST aside
+    distances, _ = memory.rays(step, origin + step, direction, np.array([0.03]), reach=0.05)
+    assert distances.tolist() == [0.03]
+    gone = 3 * step  # the ray passed the face's edge: both remembered points are out of sight
+    distances, _ = memory.rays(gone, origin + gone, direction, np.array([0.4]), reach=0.05)
+    np.testing.assert_allclose(distances, [0.4, np.hypot(0.03, 3 * step[1]), np.hypot(0.03, 2 * step[1])])
+
+
+def test_memory_steps_must_be_a_whole_number():
+    with pytest.raises(ValueError, match="memory_steps must be >= 0"):
+        SafetyLayer(memory_steps=-1)
+    with pytest.raises(ValueError, match="whole number"):
+        SafetyLayer(memory_steps=2.5)
 
 
 def _box_behind(ee):  # its +x face 9 cm to the -x of the tool point

@@ -133,6 +133,9 @@ def build_parser() -> argparse.ArgumentParser:
     roll.add_argument("--slide", type=float, default=ACTING_SAFETY.slide,
                       help="step towards the goal when the layer leaves less than this share of the policy's step "
                            "(0: off; rayreach.safety)")
+    roll.add_argument("--memory-steps", type=int, default=ACTING_SAFETY.memory_steps,
+                      help="the shield also holds off what the rays saw near in this many last steps "
+                           "(0: off; rayreach.safety.HitMemory)")
     roll.add_argument("--seed", type=int, default=None, help="seed of the first random world (default 1000000)")
     roll.add_argument("--json", action="store_true", help="print one JSON line")
 
@@ -377,7 +380,7 @@ def _rollout(args: argparse.Namespace, scenario: str) -> int:
     from rayreach.rollout import EVAL_SEED_OFFSET, rollout
     from rayreach.safety import SafetyLayer
 
-    safety = SafetyLayer(args.workspace_guard, args.ray_shield, args.slide)
+    safety = SafetyLayer(args.workspace_guard, args.ray_shield, args.slide, args.memory_steps)
     summary = rollout(args.model, scenario, episodes=args.episodes, deterministic=not args.stochastic,
                       goal_tolerance=args.tolerance, n_obstacles=args.obstacles, progress=not args.json,
                       final_approach=None if args.no_final_approach

@@ -53,7 +53,7 @@ from rayreach import rewards as R
 from rayreach.kinematics import IKParams, Kinematics
 from rayreach.policy import FinalApproach
 from rayreach.robots import RobotSpec, get_robot
-from rayreach.safety import SafetyLayer
+from rayreach.safety import HitMemory, SafetyLayer
 from rayreach.scenarios import RANDOM, Scenario, ScenarioError, get_scenario
 from rayreach.scenarios.feasibility import solve_start, validate
 from rayreach.scenarios.random_world import RandomWorldConfig, RandomWorlds
@@ -211,8 +211,10 @@ class ReachEnv(gym.Env):
             radius=self.spec_robot.final_approach_radius if approach.radius is None else approach.radius)
 
     def set_safety(self, layer: SafetyLayer) -> None:
-        """Pass each action through ``layer`` (``SafetyLayer()``: off) from the next step on."""
+        """Pass each action through ``layer`` (``SafetyLayer()``: off) from the next step on
+        (remembering hits from then on)."""
         self.config = make_config(self.config, {"safety": layer})
+        self._hit_memory = HitMemory(layer.memory_steps)
 
     @property
     def final_approach(self) -> FinalApproach | None:
@@ -253,6 +255,7 @@ class ReachEnv(gym.Env):
         self.steps = 0
         self.time = 0.0
         self._shake.reset()
+        self._hit_memory = HitMemory(self.config.safety.memory_steps)
         self._ready = True
         distance = float(np.linalg.norm(self.goals[0] - self.ee_pos))
         self._previous_distance = distance
@@ -287,9 +290,11 @@ class ReachEnv(gym.Env):
             commanded = delta[:3]
             travel = None if straight is None else float(np.linalg.norm(offset))  # the straight step, in all
             towards_goal = None if straight is not None else FinalApproach.towards(offset)[:3] * self._step_scale[:3]
+            distances, directions = self._hit_memory.rays(self.ee_pos, self._ray_origins, self._ray_directions,
+                                                          self._ray_fractions * cfg.ray_range, cfg.safety.ray_shield)
             delta = cfg.safety.filter(delta, self.ee_pos, np.asarray(scenario.workspace_low),  # type: ignore[union-attr]
                                       np.asarray(scenario.workspace_high),  # type: ignore[union-attr]
-                                      self._ray_fractions * cfg.ray_range, self._ray_directions, travel, towards_goal)
+                                      distances, directions, travel, towards_goal)
             if straight is None and not stalled:  # neither step is the policy's choice
                 shielded = R.shielded_reward(commanded, delta[:3], w)
 

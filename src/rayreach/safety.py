@@ -10,6 +10,7 @@ its end-effector position) plus the workspace bounds; it never looks at the obst
 
 from __future__ import annotations
 
+from collections import deque
 from dataclasses import dataclass
 from typing import ClassVar
 
@@ -36,11 +37,17 @@ class SafetyLayer:
     slides along what it sees towards the goal. When the rules hold that step too, take a
     step as long along the allowed direction nearest the goal's, sideways or back if need
     be, so the policy acts again from a new place; 0: off."""
+    memory_steps: int = 0
+    """The shield also holds off what the rays saw near in the last this many steps
+    (``HitMemory``): as the tool moves, an obstacle's edge passes between two rings of rays
+    and no ray sees what the next step strikes; 0: off."""
 
     def __post_init__(self) -> None:
-        for name in ("workspace_guard", "ray_shield", "slide"):
+        for name in ("workspace_guard", "ray_shield", "slide", "memory_steps"):
             if not getattr(self, name) >= 0:
                 raise ValueError(f"{name} must be >= 0 (0 = off), got {getattr(self, name)}")
+        if self.memory_steps != int(self.memory_steps):
+            raise ValueError(f"memory_steps counts steps, a whole number, got {self.memory_steps}")
         if self.slide > 1:
             raise ValueError(f"slide is a share of the commanded step, 0 to 1, got {self.slide}")
 
@@ -103,6 +110,49 @@ class SafetyLayer:
         normals = self._normals(reach, ee_pos, low, high, ray_distances, ray_directions, travel)
         out[:3] = nearest_in_cone(out[:3], normals, self.TOLERANCE)
         return out
+
+
+class HitMemory:
+    """The points the rays hit near the tool in the last ``steps`` steps, each with its ray's
+    origin relative to the end effector. Read back as rays from where those origins are now
+    (moved with the end effector), they give the shield what the rays saw and no longer see.
+    Static obstacles stay where they were seen; a moving one leaves a trail the shield
+    keeps clear of for ``steps`` steps."""
+
+    MARGIN = 0.01
+    """Hits up to this much farther than the shield are remembered too, m: a step may bring
+    them within it."""
+
+    LOST = 0.01
+    """A remembered point counts as out of sight when no ray hits within this of it now, m;
+    points still in sight are the current rays' to hold off."""
+
+    def __init__(self, steps: int) -> None:
+        self._seen: deque[tuple[np.ndarray, np.ndarray]] = deque(maxlen=int(steps))
+
+    def clear(self) -> None:
+        self._seen.clear()
+
+    def rays(self, ee_pos: np.ndarray, origins: np.ndarray, directions: np.ndarray, distances: np.ndarray,
+             reach: float) -> tuple[np.ndarray, np.ndarray]:
+        """(distances, unit directions): the current rays, then one per remembered point that is
+        within ``reach`` of its ray's origin now and out of sight (``LOST``); then remembers
+        the current hits within ``reach`` plus ``MARGIN``."""
+        all_distances, all_directions = [distances], [directions]
+        hit = distances < reach + self.MARGIN
+        now = origins[hit] + directions[hit] * distances[hit, None]
+        for points, offsets in self._seen:
+            towards = points - (ee_pos + offsets)
+            size = np.linalg.norm(towards, axis=1)
+            near = (size < reach) & (size > 0)
+            if len(now) and near.any():  # only what no ray sees any more
+                gap = np.linalg.norm(points[near][:, None] - now[None], axis=2).min(axis=1)
+                near[near] = gap > self.LOST
+            all_distances.append(size[near])
+            all_directions.append(towards[near] / size[near, None])
+        if self._seen.maxlen:
+            self._seen.append((now, origins[hit] - ee_pos))
+        return np.concatenate(all_distances), np.concatenate(all_directions)
 
 
 TIE = 1e-3
@@ -168,7 +218,8 @@ def nearest_in_cone(move: np.ndarray, normals: np.ndarray, tolerance: float = 0.
     return candidates[np.argmin(np.linalg.norm(candidates - move, axis=1))]
 
 
-ACTING_SAFETY = SafetyLayer(workspace_guard=0.01, ray_shield=0.05, slide=0.1)
+ACTING_SAFETY = SafetyLayer(workspace_guard=0.01, ray_shield=0.05, slide=0.1, memory_steps=10)
 """The layer the executor and ``rollout`` act with: two 5 mm steps from a bound, a 5 cm
-shield (chosen from 3, 5 and 8 cm on random worlds) and a slide once less than a tenth of
-a step is left (docs/training.md, "Acting")."""
+shield (chosen from 3, 5 and 8 cm on random worlds) that remembers the last 10 steps' near
+hits (10, 20 and 40 measured alike), and a slide once less than a tenth of a step is left
+(docs/training.md, "Acting")."""
