@@ -138,21 +138,21 @@ class HitMemory:
         """(distances, unit directions): the current rays, then one per remembered point that is
         within ``reach`` of its ray's origin now and out of sight (``LOST``); then remembers
         the current hits within ``reach`` plus ``MARGIN``."""
-        all_distances, all_directions = [distances], [directions]
         hit = distances < reach + self.MARGIN
         now = origins[hit] + directions[hit] * distances[hit, None]
-        for points, offsets in self._seen:
-            towards = points - (ee_pos + offsets)
+        extra_distances, extra_directions = np.zeros(0), np.zeros((0, 3))
+        if self._seen:
+            points = np.concatenate([p for p, _ in self._seen])
+            towards = points - (ee_pos + np.concatenate([o for _, o in self._seen]))
             size = np.linalg.norm(towards, axis=1)
-            near = (size < reach) & (size > 0)
-            if len(now) and near.any():  # only what no ray sees any more
-                gap = np.linalg.norm(points[near][:, None] - now[None], axis=2).min(axis=1)
-                near[near] = gap > self.LOST
-            all_distances.append(size[near])
-            all_directions.append(towards[near] / size[near, None])
+            near = np.flatnonzero((size < reach) & (size > 0))
+            if len(now) and len(near):  # only what no ray sees any more
+                gap = ((points[near, None] - now[None]) ** 2).sum(axis=2).min(axis=1)
+                near = near[gap > self.LOST ** 2]
+            extra_distances, extra_directions = size[near], towards[near] / size[near, None]
         if self._seen.maxlen:
             self._seen.append((now, origins[hit] - ee_pos))
-        return np.concatenate(all_distances), np.concatenate(all_directions)
+        return np.concatenate([distances, extra_distances]), np.concatenate([directions, extra_directions])
 
 
 TIE = 1e-3
