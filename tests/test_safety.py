@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -192,6 +194,47 @@ def test_hit_memory_leaves_what_the_rays_still_see_to_them():
     gone = 3 * step  # the ray passed the face's edge: both remembered points are out of sight
     distances, _ = memory.rays(gone, origin + gone, direction, np.array([0.4]), reach=0.05)
     np.testing.assert_allclose(distances, [0.4, np.hypot(0.03, 3 * step[1]), np.hypot(0.03, 2 * step[1])])
+
+
+def test_allows_checks_a_realised_step_against_the_filters_rules():
+    layer = SafetyLayer(workspace_guard=0.01, ray_shield=0.05)
+    ray = np.array([[-1.0, 0.0, 0.0]])
+    middle = np.array([0.0, 0.5, 0.3])
+    assert layer.allows(np.array([0.0, 0.005, 0.0]), middle, LOW, HIGH, np.array([0.03]), ray)
+    assert not layer.allows(np.array([-0.001, 0.005, 0.0]), middle, LOW, HIGH, np.array([0.03]), ray)
+    assert layer.allows(np.array([-0.001, 0.005, 0.0]), middle, LOW, HIGH, np.array([0.3]), ray)  # far: no rule
+    assert layer.allows(np.array([-0.00005, 0.005, 0.0]), middle, LOW, HIGH, np.array([0.03]), ray)  # within 0.1 mm
+
+
+def _near_box(ee):  # its +x face 5 cm to the -x of the tool point; the nearest ray reads 3 cm
+    return ObstacleSpec("box", (ee[0] - 0.10, ee[1], ee[2]), half_extents=(0.05, 0.15, 0.15))
+
+
+@pytest.mark.parametrize("converged", [False, True])
+def test_an_unconverged_ik_step_towards_what_the_rays_see_is_not_taken(converged, monkeypatch):
+    """The layer lets a sideways step through; IK, failing to converge, would put the tool
+    2 mm nearer the box the rays see 3 cm away. The arm holds still instead. A converged
+    IK result is taken as it comes (it is the step the layer let through, within 0.1 mm)."""
+    env = exp1_around_the_tool([_near_box], safety=ACTING_SAFETY)
+    try:
+        env.reset(seed=0)
+        real_ik = env.kin.ik
+
+        def drifting_ik(target_pos, target_rot, q, params, start_frames=None):
+            drifted = real_ik(np.asarray(target_pos) + np.array([-0.002, 0.0, 0.0]), target_rot, q, params,
+                              start_frames=start_frames)
+            return dataclasses.replace(drifted, converged=converged)
+
+        monkeypatch.setattr(env.kin, "ik", drifting_ik)
+        before, q = env.ee_pos.copy(), env.q.copy()
+        env.step(np.array([0, 1, 0, 0, 0, 0], np.float32))
+        if converged:
+            assert env.ee_pos[0] < before[0] - 0.0015 and env.ee_pos[1] > before[1] + 0.004
+        else:
+            np.testing.assert_array_equal(env.q, q)
+            np.testing.assert_array_equal(env.ee_pos, before)
+    finally:
+        env.close()
 
 
 def test_memory_steps_must_be_a_whole_number():

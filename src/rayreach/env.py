@@ -285,25 +285,27 @@ class ReachEnv(gym.Env):
         cfg = self.config
         w = cfg.rewards
         shielded = 0.0
+        rules = None
         if cfg.safety.active:
             scenario = self.scenario
             commanded = delta[:3]
             travel = None if straight is None else float(np.linalg.norm(offset))  # the straight step, in all
             towards_goal = None if straight is not None else FinalApproach.towards(offset)[:3] * self._step_scale[:3]
-            distances, directions = self._hit_memory.rays(self.ee_pos, self._ray_origins, self._ray_directions,
-                                                          self._ray_fractions * cfg.ray_range, cfg.safety.ray_shield)
-            delta = cfg.safety.filter(delta, self.ee_pos, np.asarray(scenario.workspace_low),  # type: ignore[union-attr]
-                                      np.asarray(scenario.workspace_high),  # type: ignore[union-attr]
-                                      distances, directions, travel, towards_goal)
+            rules = (self.ee_pos, np.asarray(scenario.workspace_low), np.asarray(scenario.workspace_high),  # type: ignore[union-attr]
+                     *self._hit_memory.rays(self.ee_pos, self._ray_origins, self._ray_directions,
+                                            self._ray_fractions * cfg.ray_range, cfg.safety.ray_shield), travel)
+            delta = cfg.safety.filter(delta, *rules, towards_goal)
             if straight is None and not stalled:  # neither step is the policy's choice
                 shielded = R.shielded_reward(commanded, delta[:3], w)
 
         target_pos = self.ee_pos + delta[:3]
         target_rot = rotvec_to_matrix(delta[3:]) @ self.ee_rot
         ik = self.kin.ik(target_pos, target_rot, self.q, cfg.ik, start_frames=self.frames)
-        self.q, self.frames = ik.q, ik.frames
-        ee = self.kin.ee_from_frames(self.frames)
-        self.ee_pos, self.ee_rot = ee[:3, 3], ee[:3, :3]
+        ee = self.kin.ee_from_frames(ik.frames)
+        # an unconverged IK step may move the tool where the layer did not let it: then it holds still
+        if rules is None or ik.converged or cfg.safety.allows(ee[:3, 3] - self.ee_pos, *rules):
+            self.q, self.frames = ik.q, ik.frames
+            self.ee_pos, self.ee_rot = ee[:3, 3], ee[:3, :3]
 
         self.steps += 1
         self.time = self.steps * cfg.control_period

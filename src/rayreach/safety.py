@@ -83,6 +83,15 @@ class SafetyLayer:
                     out[:3] = way * size
         return out
 
+    def allows(self, move: np.ndarray, ee_pos: np.ndarray, low: np.ndarray, high: np.ndarray,
+               ray_distances: np.ndarray, ray_directions: np.ndarray, travel: float | None = None,
+               tolerance: float = 1e-4) -> bool:
+        """Whether the translation ``move`` goes at most ``tolerance`` (m) towards a near ray or
+        a bound under the same rules as ``filter``: the check of where IK put the tool, which,
+        when IK does not converge, is not the step the layer let through."""
+        normals = self._normals(float(np.linalg.norm(move)), ee_pos, low, high, ray_distances, ray_directions, travel)
+        return bool(np.all(normals @ move <= tolerance))
+
     def _shields(self, ray_distances: np.ndarray, travel: float | None) -> bool:
         """Whether the shield acts: it is on, and the motion's ``travel`` (when known) reaches
         as far as the nearest thing a ray sees."""
