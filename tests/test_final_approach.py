@@ -3,6 +3,8 @@ ray casts, and the straight step in a scene (PyBullet's contacts), for acting an
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pybullet as p
 import pytest
@@ -299,3 +301,35 @@ def test_set_trainable_moves_only_what_it_frees(actor, features):
         assert all(q.requires_grad for q in policy.parameters())
     finally:
         venv.close()
+
+
+@pytest.mark.parametrize("policy_step", [False, True])
+def test_a_straight_step_lets_the_orientation_go_when_ik_cannot_keep_it(policy_step, monkeypatch):
+    """With an IK that cannot reach any full pose (a stand-in for a tool orientation out of
+    reach), the final approach still moves the tip to the goal, solving for the position
+    alone; the policy's own steps get no such fallback, and the unconverged 6-D result
+    (here, the unchanged configuration) is all they get."""
+    goal = np.array([0.03, 0.0, 0.0])
+    env = exp1_around_the_tool([], goal, final_approach=None if policy_step else FinalApproach())
+    try:
+        env.reset(seed=0)
+        real_ik = env.kin.ik
+        asked = []
+
+        def pose_out_of_reach(target_pos, target_rot, q, params, start_frames=None):
+            asked.append(target_rot is None)
+            if target_rot is None:
+                return real_ik(target_pos, None, q, params, start_frames=start_frames)
+            stuck = real_ik(env.ee_pos, env.ee_rot, q, params, start_frames=start_frames)
+            return dataclasses.replace(stuck, converged=False)
+
+        monkeypatch.setattr(env.kin, "ik", pose_out_of_reach)
+        start = env.ee_pos.copy()
+        _, _, terminated, _, info = env.step(np.array([1, 0, 0, 0, 0, 0], np.float32))
+        if policy_step:
+            assert asked == [False] and np.linalg.norm(env.ee_pos - start) < 1e-4
+        else:
+            assert asked == [False, True]
+            assert env.ee_pos[0] - start[0] == pytest.approx(0.005, abs=2e-4)  # a full step along x
+    finally:
+        env.close()
