@@ -325,7 +325,7 @@ def test_a_straight_step_lets_the_orientation_go_when_ik_cannot_keep_it(policy_s
 
         monkeypatch.setattr(env.kin, "ik", pose_out_of_reach)
         start = env.ee_pos.copy()
-        _, _, terminated, _, info = env.step(np.array([1, 0, 0, 0, 0, 0], np.float32))
+        env.step(np.array([1, 0, 0, 0, 0, 0], np.float32))
         if policy_step:
             assert asked == [False] and np.linalg.norm(env.ee_pos - start) < 1e-4
         else:

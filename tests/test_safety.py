@@ -213,8 +213,8 @@ def _near_box(ee):  # its +x face 5 cm to the -x of the tool point; the nearest 
 @pytest.mark.parametrize("converged", [False, True])
 def test_an_unconverged_ik_step_towards_what_the_rays_see_is_not_taken(converged, monkeypatch):
     """The layer lets a sideways step through; IK, failing to converge, would put the tool
-    2 mm nearer the box the rays see 3 cm away. The arm holds still instead. A converged
-    IK result is taken as it comes (it is the step the layer let through, within 0.1 mm)."""
+    2 mm nearer the box the rays see 3 cm away. The arm holds still instead. A result IK
+    reports as converged is taken as it comes: it is the step asked for, within IK's 0.1 mm."""
     env = exp1_around_the_tool([_near_box], safety=ACTING_SAFETY)
     try:
         env.reset(seed=0)

@@ -139,9 +139,6 @@ class HitMemory:
     def __init__(self, steps: int) -> None:
         self._seen: deque[tuple[np.ndarray, np.ndarray]] = deque(maxlen=int(steps))
 
-    def clear(self) -> None:
-        self._seen.clear()
-
     def rays(self, ee_pos: np.ndarray, origins: np.ndarray, directions: np.ndarray, distances: np.ndarray,
              reach: float) -> tuple[np.ndarray, np.ndarray]:
         """(distances, unit directions): the current rays, then one per remembered point that is
