@@ -27,6 +27,7 @@ def _pick_scenario(args: argparse.Namespace, parser: argparse.ArgumentParser) ->
 
 def build_parser() -> argparse.ArgumentParser:
     from rayreach.demonstrations import EXPERTS, CloneConfig  # numpy only
+    from rayreach.policy import FinalApproach  # numpy only
     from rayreach.safety import ACTING_SAFETY  # numpy only
 
     parser = argparse.ArgumentParser(prog="rayreach", description=__doc__)
