@@ -206,14 +206,13 @@ def test_the_stall_window_starts_again_at_each_goal():
         env.close()
 
 
-def test_the_env_fills_in_the_robots_radius_and_stall_steps_unless_given():
-    for robot, radius, stall in (("ur5", 0.1, 0), ("kr16", 0.2, 200)):
+def test_the_env_fills_in_the_robots_radius_unless_one_is_given():
+    for robot, radius in (("ur5", 0.1), ("kr16", 0.2)):
         env = ReachEnv(robot=robot, scenario="random", final_approach=FinalApproach())
         try:
             assert env.final_approach.radius == get_robot(robot).final_approach_radius == radius
-            assert env.final_approach.stall_steps == get_robot(robot).stall_steps == stall
-            env.set_final_approach(FinalApproach(radius=0.15, stall_steps=7))
-            assert env.final_approach.radius == 0.15 and env.final_approach.stall_steps == 7
+            env.set_final_approach(FinalApproach(radius=0.15))
+            assert env.final_approach.radius == 0.15
         finally:
             env.close()
     with pytest.raises(ValueError, match="radius"):

@@ -42,8 +42,7 @@ def test_shipped_policy_loads_with_metadata_and_runs_an_episode(robot, scenario)
     spec = get_robot(robot)  # the env fills in the robot's radius, step and tool
     assert record.config["final_approach"] == {"radius": spec.final_approach_radius, "margin": FinalApproach.margin,
                                                "ee_step": 0.005, "tool_length": spec.tool.length,
-                                               "tool_radius": spec.tool.radius, "stall_steps": spec.stall_steps,
-                                               "stall_gain": 0.01}
+                                               "tool_radius": spec.tool.radius, "stall_steps": 0, "stall_gain": 0.01}
     assert np.isfinite(record.ee_path).all()
 
 

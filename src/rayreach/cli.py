@@ -123,9 +123,9 @@ def build_parser() -> argparse.ArgumentParser:
     roll.add_argument("--final-approach-radius", type=float, default=None,
                       help="distance to the goal within which the final approach may act, m (default: the robot's, "
                            "UR5 0.1, KR16 0.2)")
-    roll.add_argument("--stall-steps", type=int, default=None,
+    roll.add_argument("--stall-steps", type=int, default=FinalApproach.stall_steps,
                       help="step towards the goal once this many steps brought it less than 1 cm nearer "
-                           "(default: the robot's, UR5 0 = off, KR16 200; docs/training.md)")
+                           "(default 0: off; 100 was measured, docs/training.md)")
     roll.add_argument("--workspace-guard", type=float, default=ACTING_SAFETY.workspace_guard,
                       help="hold the tool this far inside the workspace, m (0: off; rayreach.safety)")
     roll.add_argument("--ray-shield", type=float, default=ACTING_SAFETY.ray_shield,

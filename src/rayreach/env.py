@@ -208,8 +208,7 @@ class ReachEnv(gym.Env):
         tool = self.spec_robot.tool
         self._final_approach = None if approach is None else replace(
             approach, ee_step=self.spec_robot.ee_step, tool_length=tool.length, tool_radius=tool.radius,
-            radius=self.spec_robot.final_approach_radius if approach.radius is None else approach.radius,
-            stall_steps=self.spec_robot.stall_steps if approach.stall_steps is None else approach.stall_steps)
+            radius=self.spec_robot.final_approach_radius if approach.radius is None else approach.radius)
 
     def set_safety(self, layer: SafetyLayer) -> None:
         """Pass each action through ``layer`` (``SafetyLayer()``: off) from the next step on

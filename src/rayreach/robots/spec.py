@@ -98,9 +98,6 @@ class RobotSpec:
     """Distance to the goal, m, within which the final approach may step straight at it
     (``policy.FinalApproach``); the longer the straight path, the more the arm, which no ray
     watches, moves (docs/training.md, "Acting")."""
-    stall_steps: int = 0
-    """Steps that bring the end effector less than 1 cm nearer the goal before the final
-    approach nudges it towards the goal (``policy.FinalApproach.stall_steps``); 0: off."""
 
     @property
     def n_joints(self) -> int:
