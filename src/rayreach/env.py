@@ -115,8 +115,8 @@ OUTCOMES = ("success", "collision", "out_of_bounds", "timeout")
 def episode_outcome(info: dict[str, Any]) -> str:
     """One of ``OUTCOMES`` from an episode's last ``info`` (a goal reached in contact is a
     collision; ``timeout``: the step budget ran out)."""
-    return ("success" if info["is_success"] else "collision" if info["collision"]
-            else "out_of_bounds" if info["out_of_bounds"] else "timeout")
+    return ("success" if info.get("is_success") else "collision" if info.get("collision")
+            else "out_of_bounds" if info.get("out_of_bounds") else "timeout")
 
 
 def observation_space(spec: RobotSpec, workspace_size: np.ndarray) -> gym.spaces.Box:

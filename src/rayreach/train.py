@@ -27,7 +27,6 @@ CHECKPOINT = "checkpoint.zip"
 MODEL = "model.zip"
 CURVE = "curve.csv"
 CURVE_PNG = "learning_curve.png"
-OUTCOMES = ("success", "collision", "out_of_bounds", "timeout")
 RECENT = 200
 """Episodes over which training rates are computed."""
 REWARD_TERMS = tuple(f.name for f in fields(RewardWeights) if f.name != "proximity_range")
@@ -190,16 +189,6 @@ def set_trainable(policy, actor: bool = True, features: bool = True) -> None:
 
 
 # ---------------------------------------------------------------------- bookkeeping
-def episode_outcome(info: dict[str, Any]) -> str:
-    if info.get("is_success"):
-        return "success"
-    if info.get("collision"):
-        return "collision"
-    if info.get("out_of_bounds"):
-        return "out_of_bounds"
-    return "timeout"
-
-
 @dataclass
 class TrainState:
     """What a checkpoint holds besides the model: curricula, wall time, its config."""
@@ -257,6 +246,8 @@ def _make_callback(config: TrainConfig, state: TrainState, out: Path, total: int
     import torch
     from stable_baselines3.common.callbacks import BaseCallback
     from tqdm import tqdm
+
+    from rayreach.env import OUTCOMES, episode_outcome
 
     threads = update_threads(config, torch.get_num_threads())
 
@@ -510,6 +501,7 @@ def plot_curve(csv_path: Path, png_path: Path, title: str) -> Path | None:
     import matplotlib
 
     matplotlib.use("Agg")
+    from rayreach.env import OUTCOMES
     import matplotlib.pyplot as plt
 
     with csv_path.open() as handle:
