@@ -153,8 +153,9 @@ class FinalApproach:
     radius: float | None = None
     """None: the robot's (``RobotSpec.final_approach_radius``), which the environment fills
     in. The UR5's is the enlarged goal the curriculum trains at (0.1 m), which the policy
-    reliably comes this close to; at 0.15 m and more its arm, which no ray watches, met more
-    obstacles. The KR16's is 0.2 m, where it met none more."""
+    reliably comes this close to; from 0.13 m on, its straight paths ran under moving goal
+    covers whose thin edges no ray saw, and the tool met them. The KR16's is 0.2 m, where it
+    met nothing more."""
     margin: float = 0.01
     """Least clearance, m, between the tool's surface on the straight path and anything a ray
     sees. Testing the path rather than every ray lets the tool pass beside a wall next to
