@@ -305,7 +305,8 @@ def test_slide_steps_along_the_allowed_direction_nearest_the_goal_when_the_goal_
     at_ceiling, distances = np.array([0.0, 0.5, 0.4901]), np.full(4, 0.03)
     goal_step = np.array([0.0049, 0.0002, -0.001])
     push = np.array([0.004, 0.0, 0.003, 0.0, 0.0, 0.0])
-    held = layer._apply(np.r_[goal_step, np.zeros(3)], at_ceiling, LOW, HIGH, distances, fan, None)
+    no_slide = SafetyLayer(workspace_guard=0.01, ray_shield=0.05)
+    held = no_slide.filter(np.r_[goal_step, np.zeros(3)], at_ceiling, LOW, HIGH, distances, fan)
     assert np.linalg.norm(held[:3]) < 1e-9
     out = layer.filter(push, at_ceiling, LOW, HIGH, distances, fan, towards_goal=goal_step)[:3]
     rules = np.vstack([fan, Z])

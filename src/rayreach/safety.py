@@ -69,12 +69,17 @@ class SafetyLayer:
         Each rule is a half-space through the origin that the translation must lie in, so
         the translation kept is the nearest one to the commanded that lies in all of them
         (``nearest_in_cone``)."""
-        rays = (ee_pos, low, high, ray_distances, ray_directions)
-        out = self._apply(np.array(delta, dtype=float), *rays, travel)
+        bounds = (ee_pos, low, high)
+        near = ray_directions[self._near(ray_distances, travel)]
+        out = np.array(delta, dtype=float)
+        if len(near):
+            out[3:] = 0.0
+        out[:3] = nearest_in_cone(out[:3], self._normals(float(np.linalg.norm(out[:3])), *bounds, near), self.TOLERANCE)
         least = self.slide * np.linalg.norm(delta[:3])
         if self.slide > 0 and towards_goal is not None and np.linalg.norm(out[:3]) < least:
             size = float(np.linalg.norm(towards_goal))
-            normals = self._normals(size, *rays, None)  # the rules for the goal's step, once for both tries
+            # the rules for the goal's step, once for both tries
+            normals = self._normals(size, *bounds, ray_directions[self._near(ray_distances, None)])
             out = np.zeros(6)
             out[:3] = nearest_in_cone(np.asarray(towards_goal, dtype=float), normals, self.TOLERANCE)
             if np.linalg.norm(out[:3]) < least and size > 0:
@@ -89,36 +94,29 @@ class SafetyLayer:
         """Whether the translation ``move`` goes at most ``tolerance`` (m) towards a near ray or
         a bound under the same rules as ``filter``: the check of where IK put the tool, which,
         when IK does not converge, is not the step the layer let through."""
-        normals = self._normals(float(np.linalg.norm(move)), ee_pos, low, high, ray_distances, ray_directions, travel)
+        near = ray_directions[self._near(ray_distances, travel)]
+        normals = self._normals(float(np.linalg.norm(move)), ee_pos, low, high, near)
         return bool(np.all(normals @ move <= tolerance))
 
-    def _shields(self, ray_distances: np.ndarray, travel: float | None) -> bool:
-        """Whether the shield acts: it is on, and the motion's ``travel`` (when known) reaches
-        as far as the nearest thing a ray sees."""
-        return self.ray_shield > 0 and (travel is None or travel >= ray_distances.min(initial=np.inf))
+    def _near(self, ray_distances: np.ndarray, travel: float | None) -> np.ndarray:
+        """Indices of the rays the shield holds off: those nearer than ``ray_shield``, when the
+        shield is on and the motion's ``travel`` (when known) reaches as far as the nearest
+        thing a ray sees."""
+        if self.ray_shield <= 0 or (travel is not None and travel < ray_distances.min(initial=np.inf)):
+            return np.zeros(0, int)
+        return np.flatnonzero(ray_distances < self.ray_shield)
 
     def _normals(self, reach: float, ee_pos: np.ndarray, low: np.ndarray, high: np.ndarray,
-                 ray_distances: np.ndarray, ray_directions: np.ndarray, travel: float | None) -> np.ndarray:
+                 near_directions: np.ndarray) -> np.ndarray:
         """The rules for a step of length ``reach`` as unit normals of the half-spaces
-        {m : normal @ m <= 0}: every near ray, and every bound within the step of its band."""
-        shielded = self._shields(ray_distances, travel)
-        near = np.flatnonzero(ray_distances < self.ray_shield) if shielded else np.zeros(0, int)
-        normals = [ray_directions[near].reshape(-1, 3)]
+        {m : normal @ m <= 0}: every near ray's direction, and every bound within the step
+        of its band."""
+        normals = [near_directions.reshape(-1, 3)]
         if self.workspace_guard > 0:
             axes = np.eye(3)
             normals += [axes[ee_pos + reach > high - self.workspace_guard],
                         -axes[ee_pos - reach < low + self.workspace_guard]]
         return np.concatenate(normals)
-
-    def _apply(self, out: np.ndarray, ee_pos: np.ndarray, low: np.ndarray, high: np.ndarray,
-               ray_distances: np.ndarray, ray_directions: np.ndarray, travel: float | None) -> np.ndarray:
-        """``filter`` without the slide; changes ``out`` in place and returns it."""
-        if self._shields(ray_distances, travel) and np.any(ray_distances < self.ray_shield):
-            out[3:] = 0.0
-        reach = float(np.linalg.norm(out[:3]))
-        normals = self._normals(reach, ee_pos, low, high, ray_distances, ray_directions, travel)
-        out[:3] = nearest_in_cone(out[:3], normals, self.TOLERANCE)
-        return out
 
 
 class HitMemory:
