@@ -142,6 +142,8 @@ class HitMemory:
         """(distances, unit directions): the current rays, then one per remembered point that is
         within ``reach`` of its ray's origin now and out of sight (``LOST``); then remembers
         the current hits within ``reach`` plus ``MARGIN``."""
+        if not self._seen.maxlen:
+            return distances, directions
         hit = distances < reach + self.MARGIN
         now = origins[hit] + directions[hit] * distances[hit, None]
         extra_distances, extra_directions = np.zeros(0), np.zeros((0, 3))
@@ -154,8 +156,7 @@ class HitMemory:
                 gap = ((points[near, None] - now[None]) ** 2).sum(axis=2).min(axis=1)
                 near = near[gap > self.LOST ** 2]
             extra_distances, extra_directions = size[near], towards[near] / size[near, None]
-        if self._seen.maxlen:
-            self._seen.append((now, origins[hit] - ee_pos))
+        self._seen.append((now, origins[hit] - ee_pos))
         return np.concatenate([distances, extra_distances]), np.concatenate([directions, extra_directions])
 
 
