@@ -37,8 +37,8 @@ def test_shipped_policy_loads_with_metadata_and_runs_an_episode(robot, scenario)
     assert planner.policy.normalization is not None  # training's statistics travel with the policy
     assert record.outcome in {"success", "collision", "timeout", "out of bounds"}
     assert 0 < record.steps <= 1024 and record.config["timesteps"] == meta["timesteps"]
-    assert record.config["safety"] == {"workspace_guard": 0.01, "ray_shield": 0.05, "slide": 0.1,
-                                       "memory_steps": 10}  # the executor's defaults
+    assert record.config["safety"] == {"workspace_guard": 0.01, "ray_shield": 0.05, "slide": 0.1, "memory_steps": 10,
+                                       "arm_clearance": 0.01, "arm_memory_steps": 100}  # the executor's defaults
     spec = get_robot(robot)  # the env fills in the robot's radius, step and tool
     assert record.config["final_approach"] == {"radius": spec.final_approach_radius, "margin": FinalApproach.margin,
                                                "ee_step": 0.005, "tool_length": spec.tool.length,
@@ -85,7 +85,8 @@ def test_drl_alone_runs_the_policy_without_the_acting_layers_and_restores_them()
         record = ex.run(alone, seed=0)
         again = ex.run(make_planner("drl", "ur5"), seed=0)
     assert record.planner == "drl-alone" and record.config["final_approach"] is None
-    assert record.config["safety"] == {"workspace_guard": 0.0, "ray_shield": 0.0, "slide": 0.0, "memory_steps": 0}
+    assert record.config["safety"] == {"workspace_guard": 0.0, "ray_shield": 0.0, "slide": 0.0, "memory_steps": 0,
+                                       "arm_clearance": 0.0, "arm_memory_steps": 100}
     env = ReachEnv(robot="ur5", scenario="exp1")  # no final approach, no safety layer
     try:
         obs, info = env.reset(seed=0)

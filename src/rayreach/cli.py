@@ -136,6 +136,9 @@ def build_parser() -> argparse.ArgumentParser:
     roll.add_argument("--memory-steps", type=int, default=ACTING_SAFETY.memory_steps,
                       help="the shield also holds off what the rays saw near in this many last steps "
                            "(0: off; rayreach.safety.HitMemory)")
+    roll.add_argument("--arm-clearance", type=float, default=ACTING_SAFETY.arm_clearance,
+                      help="refuse steps that bring an arm link nearer than this to what the rays saw in the last "
+                           f"{ACTING_SAFETY.arm_memory_steps} steps, m (0: off; rayreach.arm_guard)")
     roll.add_argument("--seed", type=int, default=None, help="seed of the first random world (default 1000000)")
     roll.add_argument("--json", action="store_true", help="print one JSON line")
 
@@ -380,7 +383,7 @@ def _rollout(args: argparse.Namespace, scenario: str) -> int:
     from rayreach.rollout import EVAL_SEED_OFFSET, rollout
     from rayreach.safety import SafetyLayer
 
-    safety = SafetyLayer(args.workspace_guard, args.ray_shield, args.slide, args.memory_steps)
+    safety = SafetyLayer(args.workspace_guard, args.ray_shield, args.slide, args.memory_steps, args.arm_clearance)
     summary = rollout(args.model, scenario, episodes=args.episodes, deterministic=not args.stochastic,
                       goal_tolerance=args.tolerance, n_obstacles=args.obstacles, progress=not args.json,
                       final_approach=None if args.no_final_approach
@@ -390,7 +393,8 @@ def _rollout(args: argparse.Namespace, scenario: str) -> int:
     if args.json:
         print(json.dumps({"scenario": scenario, **summary.to_dict()}))
         return 0
-    helpers = [name for name, on in (("final approach", summary.final_approach), ("safety layer", safety.active)) if on]
+    helpers = [name for name, on in (("final approach", summary.final_approach),
+                                     ("safety layer", safety.active or safety.arm_clearance > 0)) if on]
     mode = ("deterministic" if summary.deterministic else "stochastic") + ", " + (" + ".join(helpers) or "policy alone")
     print(f"{scenario}: {summary.episodes} episodes ({mode}), success {summary.success_rate:.1%}, "
           f"collisions {summary.collision_rate:.1%}, mean path {summary.path_length_mean:.3f} m, "

@@ -50,6 +50,7 @@ import gymnasium as gym
 import numpy as np
 
 from rayreach import rewards as R
+from rayreach.arm_guard import ArmCapsules, SeenPoints
 from rayreach.kinematics import IKParams, Kinematics
 from rayreach.policy import FinalApproach
 from rayreach.robots import RobotSpec, get_robot
@@ -171,6 +172,7 @@ class ReachEnv(gym.Env):
         self.kin = Kinematics(self.spec_robot, base_pos, base_rpy)
         self.scene = Scene(self.spec_robot, base_pos, base_rpy, gui=render_mode == "human")
         self.rays = RayModel(self.spec_robot, self.config.ray_range)
+        self._arm = ArmCapsules(self.scene, self.spec_robot.blind_links)
         self.worlds = RandomWorlds(self.kin, self.scene, self.config.random_world) if self.random else None
         self.n_obstacles = self.config.random_world.n_obstacles
 
@@ -215,6 +217,7 @@ class ReachEnv(gym.Env):
         (remembering hits from then on)."""
         self.config = make_config(self.config, {"safety": layer})
         self._hit_memory = HitMemory(layer.memory_steps)
+        self._seen = SeenPoints(layer.arm_memory_steps)
 
     @property
     def final_approach(self) -> FinalApproach | None:
@@ -256,13 +259,16 @@ class ReachEnv(gym.Env):
         self.time = 0.0
         self._shake.reset()
         self._hit_memory = HitMemory(self.config.safety.memory_steps)
+        self._seen = SeenPoints(self.config.safety.arm_memory_steps)
         self._ready = True
         distance = float(np.linalg.norm(self.goals[0] - self.ee_pos))
         self._previous_distance = distance
         self._distances = [distance]  # to the current goal, one per step (the final approach's stall rule)
         info = {"distance": distance, "ee_position": self.ee_pos.copy(), "goal": self.goals[0].copy(),
                 "is_success": False}
-        return self._observation(distance, self._cast_rays()), info
+        observation = self._observation(distance, self._cast_rays())
+        self._remember_hits()
+        return observation, info
 
     def step(self, action: np.ndarray):
         if not self._ready:
@@ -307,7 +313,10 @@ class ReachEnv(gym.Env):
             ik = self.kin.ik(target_pos, None, self.q, cfg.ik, start_frames=self.frames)
         ee = self.kin.ee_from_frames(ik.frames)
         # an unconverged IK step may move the tool where the layer did not let it: then it holds still
-        if rules is None or ik.converged or cfg.safety.allows(ee[:3, 3] - self.ee_pos, *rules):
+        taken = rules is None or ik.converged or cfg.safety.allows(ee[:3, 3] - self.ee_pos, *rules)
+        if taken and cfg.safety.arm_clearance > 0:
+            taken = self._arm_keeps_clear(ik.q, cfg.safety.arm_clearance)
+        if taken:
             self.q, self.frames = ik.q, ik.frames
             self.ee_pos, self.ee_rot = ee[:3, 3], ee[:3, :3]
 
@@ -324,6 +333,8 @@ class ReachEnv(gym.Env):
         reached = distance < self.tolerance
         n_shakes = self._shake.update(distance)
         rays = self._cast_rays()
+        if taken:  # a held arm sees what it saw: the memory ages only as the arm moves
+            self._remember_hits()
         terms = {
             "success": 0.0 if collided else R.success_reward(distance, self.tolerance, w),
             "collision": R.collision_reward(collided, w),
@@ -374,6 +385,25 @@ class ReachEnv(gym.Env):
         self._ray_origins, self._ray_directions = self.rays.world_rays(self.frames)
         self._ray_fractions = self.caster.cast(self._ray_origins, self._ray_directions, self.config.ray_range)
         return self._ray_fractions
+
+    def _remember_hits(self) -> None:
+        """Keep what the rays hit now for the arm's rule (``SafetyLayer.arm_clearance``)."""
+        if self.config.safety.arm_clearance > 0:
+            self._seen.add(self.ray_hits() + self.ee_pos)
+
+    def _arm_keeps_clear(self, q: np.ndarray, clearance: float) -> bool:
+        """Whether moving the joints to ``q`` keeps every arm link ``clearance`` from what the
+        rays have seen, or brings none nearer than it is now (``SafetyLayer.arm_clearance``).
+        Moves the scene's joints; ``step`` sets them afterwards."""
+        points = self._seen.points()
+        if not len(points):
+            return True
+        self.scene.set_joints(q)
+        after = self._arm.clearance(points, clearance)
+        if after >= clearance:
+            return True
+        self.scene.set_joints(self.q)
+        return after >= self._arm.clearance(points, clearance)
 
     def ray_hits(self) -> np.ndarray:
         """The points the rays see now, relative to the end effector, m, shape (n, 3); rays

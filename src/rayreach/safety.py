@@ -41,18 +41,28 @@ class SafetyLayer:
     """The shield also holds off what the rays saw near in the last this many steps
     (``HitMemory``): as the tool moves, an obstacle's edge passes between two rings of rays
     and no ray sees what the next step strikes; 0: off."""
+    arm_clearance: float = 0.0
+    """Refuse a step (the arm holds still) that brings an arm link nearer than this, m, to a
+    point the rays hit in the last ``arm_memory_steps`` steps, and nearer than the link is
+    now (``rayreach.arm_guard``): the arm's wrist and forearm carry no rays, and sweep into
+    what the tool saw moments before; 0: off."""
+    arm_memory_steps: int = 100
+    """How many steps of ray hits ``arm_clearance`` keeps; steps in which the arm held still
+    do not count (it would forget what it is held off, and move into it)."""
 
     def __post_init__(self) -> None:
-        for name in ("workspace_guard", "ray_shield", "slide", "memory_steps"):
+        for name in ("workspace_guard", "ray_shield", "slide", "memory_steps", "arm_clearance", "arm_memory_steps"):
             if not getattr(self, name) >= 0:
                 raise ValueError(f"{name} must be >= 0 (0 = off), got {getattr(self, name)}")
-        if self.memory_steps != int(self.memory_steps):
-            raise ValueError(f"memory_steps counts steps, a whole number, got {self.memory_steps}")
+        for name in ("memory_steps", "arm_memory_steps"):
+            if getattr(self, name) != int(getattr(self, name)):
+                raise ValueError(f"{name} counts steps, a whole number, got {getattr(self, name)}")
         if self.slide > 1:
             raise ValueError(f"slide is a share of the commanded step, 0 to 1, got {self.slide}")
 
     @property
     def active(self) -> bool:
+        """Whether ``filter`` changes anything (the arm's rule is the environment's)."""
         return self.workspace_guard > 0 or self.ray_shield > 0
 
     def filter(self, delta: np.ndarray, ee_pos: np.ndarray, low: np.ndarray, high: np.ndarray,
@@ -223,8 +233,9 @@ def nearest_in_cone(move: np.ndarray, normals: np.ndarray, tolerance: float = 0.
     return candidates[np.argmin(np.linalg.norm(candidates - move, axis=1))]
 
 
-ACTING_SAFETY = SafetyLayer(workspace_guard=0.01, ray_shield=0.05, slide=0.1, memory_steps=10)
+ACTING_SAFETY = SafetyLayer(workspace_guard=0.01, ray_shield=0.05, slide=0.1, memory_steps=10, arm_clearance=0.01)
 """The layer the executor and ``rollout`` act with: two 5 mm steps from a bound, a 5 cm
 shield (chosen from 3, 5 and 8 cm on random worlds) that remembers the last 10 steps' near
-hits (10, 20 and 40 measured alike), and a slide once less than a tenth of a step is left
-(docs/training.md, "Acting")."""
+hits (10, 20 and 40 measured alike), a slide once less than a tenth of a step is left, and
+the arm held 1 cm off what the rays saw in the last 100 moving steps (1 and 2 cm, 100 to
+1024 steps measured; docs/training.md, "Acting")."""

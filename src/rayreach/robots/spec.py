@@ -98,6 +98,10 @@ class RobotSpec:
     """Distance to the goal, m, within which the final approach may step straight at it
     (``policy.FinalApproach``); the longer the straight path, the more the arm, which no ray
     watches, moves (docs/training.md, "Acting")."""
+    blind_links: tuple[str, ...] = ()
+    """Arm links next to the tool that carry no rays and pass close to what the tool sees;
+    the safety layer's arm rule keeps them clear of the points the rays hit
+    (``SafetyLayer.arm_clearance``, ``rayreach.arm_guard``)."""
 
     @property
     def n_joints(self) -> int:

@@ -1,0 +1,152 @@
+"""The arm's rule: capsules against plain geometry and PyBullet's own distances, then in the env."""
+
+from __future__ import annotations
+
+import numpy as np
+import pybullet as p
+import pytest
+
+from rayreach.arm_guard import PROBE, VOXEL, ArmCapsules, SeenPoints, _capsule, segment_distances
+from rayreach.env import ReachEnv
+from rayreach.robots import get_robot
+from rayreach.robots.urdf import TCP_LINK, TOOL_LINK
+from rayreach.safety import SafetyLayer
+from rayreach.scene import Scene
+
+
+def test_segment_distances_match_hand_geometry():
+    a, b = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]), np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
+    points = np.array([[0.5, 0.3, 0.0], [-0.3, 0.4, 0.0], [2.0, 0.0, 0.0]])
+    np.testing.assert_allclose(segment_distances(points, a, b), [[0.3, np.hypot(0.5, 0.3)], [0.5, 0.5], [1.0, 2.0]])
+
+
+def test_a_fitted_capsule_holds_a_cylinders_points_and_no_more_than_needed():
+    angle = np.linspace(0, 2 * np.pi, 24, endpoint=False)
+    ring = np.stack([0.05 * np.cos(angle), 0.05 * np.sin(angle), np.zeros_like(angle)], axis=1)
+    cylinder = np.concatenate([ring, ring + [0.0, 0.0, 0.3]])
+    a, b, radius = _capsule(cylinder)
+    assert radius == pytest.approx(0.05, abs=1e-9)
+    assert sorted([a[2], b[2]]) == pytest.approx([0.0, 0.3])
+
+
+@pytest.mark.parametrize("robot", ["ur5", "kr16"])
+def test_capsules_are_never_nearer_than_pybullet_says_the_link_is(robot):
+    """PyBullet's distance from each link's collision mesh to a point is the reference: the
+    capsules may only report less (they wrap the mesh), and a point inside a link must be
+    inside its capsule."""
+    spec = get_robot(robot)
+    scene = Scene(spec)
+    try:
+        meshed = tuple(name for name, index in scene.link_indices.items() if name not in (TOOL_LINK, TCP_LINK)
+                       and p.getMeshData(scene.robot, index, physicsClientId=scene.client)[0] >= 4)
+        assert set(spec.blind_links) < set(meshed) and len(meshed) >= 6
+        capsules = ArmCapsules(scene, meshed)
+        probe = p.createCollisionShape(p.GEOM_SPHERE, radius=1e-4, physicsClientId=scene.client)
+        rng = np.random.default_rng(0)
+        for _ in range(3):
+            scene.set_joints(np.asarray(spec.home) + rng.uniform(-0.5, 0.5, len(spec.home)))
+            a, b = capsules.world()
+            for k, link in enumerate(capsules.links):
+                centre = (a[k] + b[k]) / 2
+                points = centre + rng.uniform(-0.3, 0.3, (40, 3))
+                for point in points:
+                    close = p.getClosestPoints(scene.robot, -1, 1.0, linkIndexA=link, collisionShapeB=probe,
+                                               collisionShapePositionB=point.tolist(), physicsClientId=scene.client)
+                    truth = min(c[8] for c in close) if close else 1.0
+                    ours = float(segment_distances(point[None], a[k:k + 1], b[k:k + 1])[0, 0] - capsules.radii[k])
+                    assert ours <= truth + 2e-3  # PyBullet pads its meshes by about a millimetre
+                    assert truth >= 0 or ours < 0
+    finally:
+        scene.close()
+
+
+@pytest.mark.parametrize("robot", ["ur5", "kr16"])
+def test_clearance_misses_no_point_pybullet_finds_near_a_blind_link(robot):
+    """The capsules only pick which points to measure: the result is PyBullet's least
+    distance over every point and link, capped at ``within``."""
+    spec = get_robot(robot)
+    scene = Scene(spec)
+    try:
+        links = ArmCapsules(scene, spec.blind_links)
+        probe = p.createCollisionShape(p.GEOM_SPHERE, radius=PROBE, physicsClientId=scene.client)
+        rng = np.random.default_rng(1)
+        scene.set_joints(np.asarray(spec.home))
+        a, b = links.world()
+        for within in (0.01, 0.03, 0.1):
+            points = (a[0] + b[-1]) / 2 + rng.uniform(-0.25, 0.25, (150, 3))
+            truth = within
+            for link in links.links:
+                for point in points:
+                    close = p.getClosestPoints(scene.robot, -1, within, linkIndexA=link, collisionShapeB=probe,
+                                               collisionShapePositionB=point.tolist(), physicsClientId=scene.client)
+                    truth = min([truth, *(c[8] for c in close)])
+            assert links.clearance(points, within) == pytest.approx(truth, abs=1e-12)
+        assert truth < 0.1  # some points were near enough to matter
+    finally:
+        scene.close()
+
+
+def test_seen_points_forget_old_steps_and_keep_one_point_per_voxel():
+    seen = SeenPoints(steps=2)
+    assert seen.points().shape == (0, 3)
+    seen.add(np.array([[0.0, 0.0, 0.0], [VOXEL / 4, 0.0, 0.0]]))  # one voxel
+    seen.add(np.array([[1.0, 0.0, 0.0]]))
+    assert len(seen.points()) == 2
+    seen.add(np.zeros((0, 3)))
+    seen.add(np.array([[2.0, 0.0, 0.0]]))
+    np.testing.assert_allclose(seen.points(), [[2.0, 0.0, 0.0]])
+
+
+def _wrist_step(point_side: float, steps: int = 1, memory: int = 5) -> float:
+    """``steps`` +x steps of the KR16 in exp4 with one seen point placed 1.5 cm off the wrist's
+    surface on the side ``point_side`` (+1: where the steps go). Returns how far the tool
+    moved."""
+    env = ReachEnv(robot="kr16", scenario="exp4", safety=SafetyLayer(arm_clearance=0.02, arm_memory_steps=memory))
+    try:
+        env.reset(seed=0)
+        scene, link = env.scene, env.scene.link_indices["link_5"]
+        wrist = env._arm.links.index(link)
+        a, b = env._arm.world()
+        outward = point_side * np.array([1.0, 0.0, 0.0])
+        far = (a[wrist] + b[wrist]) / 2 + 0.5 * outward
+        probe = p.createCollisionShape(p.GEOM_SPHERE, radius=1e-4, physicsClientId=scene.client)
+        close = p.getClosestPoints(scene.robot, -1, 1.0, linkIndexA=link, collisionShapeB=probe,
+                                   collisionShapePositionB=far.tolist(), physicsClientId=scene.client)
+        surface = np.asarray(min(close, key=lambda c: c[8])[5])
+        env._seen.add((surface + 0.015 * outward)[None])
+        before = env.ee_pos.copy()
+        for _ in range(steps):
+            _, _, _, _, info = env.step(np.array([1.0, 0, 0, 0, 0, 0], np.float32))
+        return float(np.linalg.norm(info["ee_position"] - before))
+    finally:
+        env.close()
+
+
+def test_a_step_that_sweeps_the_wrist_towards_a_seen_point_is_refused_and_one_away_is_taken():
+    assert _wrist_step(+1.0) == 0.0
+    moved = _wrist_step(-1.0)
+    assert moved == pytest.approx(0.005, abs=5e-4)
+
+
+def test_unknown_or_meshless_links_are_refused_by_name():
+    scene = Scene(get_robot("ur5"))
+    try:
+        with pytest.raises(ValueError, match="has no links \\['elbow'\\]; it has .*forearm_link"):
+            ArmCapsules(scene, ("elbow",))
+        with pytest.raises(ValueError, match="no collision mesh"):
+            ArmCapsules(scene, (TCP_LINK,))
+    finally:
+        scene.close()
+
+
+def test_a_held_arm_does_not_forget_what_holds_it():
+    """With a memory of one step, the point would be gone after the first held step if held
+    steps counted; they do not, so the arm stays held."""
+    assert _wrist_step(+1.0, steps=5, memory=1) == 0.0
+
+
+def test_arm_rule_settings_are_checked():
+    with pytest.raises(ValueError, match="arm_clearance must be >= 0"):
+        SafetyLayer(arm_clearance=-0.01)
+    with pytest.raises(ValueError, match="arm_memory_steps counts steps"):
+        SafetyLayer(arm_memory_steps=2.5)
