@@ -6,7 +6,7 @@ import numpy as np
 import pybullet as p
 import pytest
 
-from rayreach.arm_guard import PROBE, VOXEL, ArmCapsules, SeenPoints, _capsule, segment_distances
+from rayreach.arm_guard import PAD, PROBE, VOXEL, ArmCapsules, SeenPoints, _capsule, _first_per_cell, segment_distances
 from rayreach.env import ReachEnv
 from rayreach.robots import get_robot
 from rayreach.robots.urdf import TCP_LINK, TOOL_LINK
@@ -54,7 +54,7 @@ def test_capsules_are_never_nearer_than_pybullet_says_the_link_is(robot):
                                                collisionShapePositionB=point.tolist(), physicsClientId=scene.client)
                     truth = min(c[8] for c in close) if close else 1.0
                     ours = float(segment_distances(point[None], a[k:k + 1], b[k:k + 1])[0, 0] - capsules.radii[k])
-                    assert ours <= truth + 2e-3  # PyBullet pads its meshes by about a millimetre
+                    assert ours <= truth + PAD  # PyBullet pads its meshes by about a millimetre
                     assert truth >= 0 or ours < 0
     finally:
         scene.close()
@@ -86,15 +86,23 @@ def test_clearance_misses_no_point_pybullet_finds_near_a_blind_link(robot):
         scene.close()
 
 
-def test_seen_points_forget_old_steps_and_keep_one_point_per_voxel():
+def test_seen_points_forget_old_steps():
     seen = SeenPoints(steps=2)
     assert seen.points().shape == (0, 3)
-    seen.add(np.array([[0.0, 0.0, 0.0], [VOXEL / 4, 0.0, 0.0]]))  # one voxel
+    seen.add(np.array([[0.0, 0.0, 0.0], [0.01, 0.0, 0.0]]))
     seen.add(np.array([[1.0, 0.0, 0.0]]))
-    assert len(seen.points()) == 2
+    np.testing.assert_allclose(seen.points(), [[0.0, 0.0, 0.0], [0.01, 0.0, 0.0], [1.0, 0.0, 0.0]])
     seen.add(np.zeros((0, 3)))
     seen.add(np.array([[2.0, 0.0, 0.0]]))
     np.testing.assert_allclose(seen.points(), [[2.0, 0.0, 0.0]])
+    nothing = SeenPoints(steps=0)
+    nothing.add(np.ones((3, 3)))
+    assert nothing.points().shape == (0, 3)
+
+
+def test_points_in_one_voxel_are_measured_once_the_first_kept():
+    points = np.array([[VOXEL / 4, 0.0, 0.0], [0.0, 0.0, 3 * VOXEL], [0.0, 0.0, 0.0], [-VOXEL / 4, 0.0, 0.0]])
+    assert _first_per_cell(points).tolist() == [0, 1, 3]
 
 
 def _wrist_step(point_side: float, steps: int = 1, memory: int = 5) -> float:
@@ -105,15 +113,15 @@ def _wrist_step(point_side: float, steps: int = 1, memory: int = 5) -> float:
     try:
         env.reset(seed=0)
         scene, link = env.scene, env.scene.link_indices["link_5"]
-        wrist = env._arm.links.index(link)
-        a, b = env._arm.world()
+        wrist = env._arm_guard.links.links.index(link)
+        a, b = env._arm_guard.links.world()
         outward = point_side * np.array([1.0, 0.0, 0.0])
         far = (a[wrist] + b[wrist]) / 2 + 0.5 * outward
         probe = p.createCollisionShape(p.GEOM_SPHERE, radius=1e-4, physicsClientId=scene.client)
         close = p.getClosestPoints(scene.robot, -1, 1.0, linkIndexA=link, collisionShapeB=probe,
                                    collisionShapePositionB=far.tolist(), physicsClientId=scene.client)
         surface = np.asarray(min(close, key=lambda c: c[8])[5])
-        env._seen.add((surface + 0.015 * outward)[None])
+        env._arm_guard.seen.add((surface + 0.015 * outward)[None])
         before = env.ee_pos.copy()
         for _ in range(steps):
             _, _, _, _, info = env.step(np.array([1.0, 0, 0, 0, 0, 0], np.float32))

@@ -5,9 +5,9 @@ themselves are blind, and a KR16 wrist sweeping past a sphere the tool saw a mom
 is most of what that robot still strikes (docs/training.md, "Acting"). ``SeenPoints``
 remembers where the rays hit over the last steps; ``ArmCapsules`` wraps the robot's
 ``blind_links`` in capsules fitted to their collision meshes and measures the seen points
-near them against the meshes, so a step can be refused when it brings a link nearer than
-``clearance`` to a point that was seen. Only ray data enters the rule, as for the rest
-of the safety layer.
+near them against the meshes; ``ArmGuard`` refuses a step that brings a link nearer than
+``clearance`` to a point that was seen. Only ray data enters the rule, as for the rest of
+the safety layer.
 """
 
 from __future__ import annotations
@@ -20,11 +20,14 @@ import pybullet as p
 from rayreach.scene import Scene
 
 VOXEL = 0.005
-"""Seen points closer than this, m, are kept once (a static surface is hit again every step)."""
-
+"""Seen points closer than this, m, are measured once (a static surface is hit again every step)."""
 
 PROBE = 1e-4
 """Radius, m, of the sphere PyBullet measures a seen point as."""
+
+PAD = 0.002
+"""How much nearer than a capsule says, m, PyBullet may measure a point: it pads its meshes
+by about a millimetre (``tests/test_arm_guard.py``)."""
 
 
 def _capsule(vertices: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
@@ -81,19 +84,41 @@ class ArmCapsules:
             a[k], b[k] = self._ends[k] @ rot.T + np.asarray(state[0])
         return a, b
 
-    def clearance(self, points: np.ndarray, within: float) -> float:
+    def clearance(self, points: np.ndarray, within: float,
+                  ends: tuple[np.ndarray, np.ndarray] | None = None) -> float:
         """Least distance, m, from ``points`` (n, 3) to the links' collision meshes in the
         scene's current joint state, as PyBullet measures it, or ``within`` if none is
-        nearer. The capsules pick the points worth measuring."""
+        nearer. The capsules (``ends``: ``world()``'s, if already known) bound each point's
+        distance from below, so points are measured nearest first, one per ``VOXEL``-sized
+        cell, until the bound passes the nearest measured."""
         if not len(points) or not len(self.links):
             return within
-        a, b = self.world()
+        a, b = self.world() if ends is None else ends
+        # a sphere around each capsule first: a cheap product, where most points drop out
+        middle, half = (a + b) / 2, np.linalg.norm(b - a, axis=1) / 2
+        square = (points * points).sum(axis=1)[:, None] - 2 * points @ middle.T + (middle * middle).sum(axis=1)[None]
+        points = points[(square < (half + self.radii + within)[None] ** 2).any(axis=1)]
+        bound = segment_distances(points, a, b) - self.radii[None]
         best = within
-        for i, k in zip(*np.nonzero(segment_distances(points, a, b) - self.radii[None] < within)):
-            close = p.getClosestPoints(self.scene.robot, -1, best, linkIndexA=self.links[k], collisionShapeB=self._probe,
-                                       collisionShapePositionB=points[i].tolist(), physicsClientId=self.scene.client)
-            best = min([best, *(c[8] for c in close)])
+        for k in np.flatnonzero((bound < within).any(axis=0)):
+            order = np.argsort(bound[:, k])
+            order = order[bound[order, k] < within]
+            for i in order[_first_per_cell(points[order])]:
+                if bound[i, k] - PAD >= best:
+                    break
+                close = p.getClosestPoints(self.scene.robot, -1, best, linkIndexA=self.links[k],
+                                           collisionShapeB=self._probe, collisionShapePositionB=points[i].tolist(),
+                                           physicsClientId=self.scene.client)
+                best = min([best, *(c[8] for c in close)])
         return float(best)
+
+
+def _first_per_cell(points: np.ndarray) -> np.ndarray:
+    """Indices, in order, of the first of ``points`` in each ``VOXEL``-sized cell (a static
+    surface is hit again every step)."""
+    cells = np.floor(points / VOXEL).astype(np.int64) + _CELL_OFFSET
+    _, first = np.unique((cells[:, 0] << 42) | (cells[:, 1] << 21) | cells[:, 2], return_index=True)
+    return np.sort(first)
 
 
 class SeenPoints:
@@ -101,19 +126,49 @@ class SeenPoints:
     where they were seen; a moving one leaves a trail."""
 
     def __init__(self, steps: int) -> None:
-        self._steps: deque[tuple[np.ndarray, np.ndarray]] = deque(maxlen=int(steps))
+        self._counts: deque[int] = deque(maxlen=int(steps))
+        self._points = np.zeros((0, 3))
 
     def add(self, points: np.ndarray) -> None:
+        """Remember ``points`` (n, 3) as one step's hits, forgetting the oldest step's."""
+        if not self._counts.maxlen:
+            return
         points = np.asarray(points, dtype=float).reshape(-1, 3)
-        cells = np.floor(points / VOXEL).astype(np.int64) + _CELL_OFFSET
-        self._steps.append((points, (cells[:, 0] << 42) | (cells[:, 1] << 21) | cells[:, 2]))
+        oldest = self._counts[0] if len(self._counts) == self._counts.maxlen else 0
+        self._counts.append(len(points))
+        self._points = np.concatenate([self._points[oldest:], points])
 
     def points(self) -> np.ndarray:
-        """The remembered points, one per ``VOXEL``-sized cell."""
-        if not self._steps:
-            return np.zeros((0, 3))
-        _, first = np.unique(np.concatenate([key for _, key in self._steps]), return_index=True)
-        return np.concatenate([points for points, _ in self._steps])[first]
+        """The remembered points, oldest first, (n, 3)."""
+        return self._points
+
+
+class ArmGuard:
+    """The arm's rule for one episode (``SafetyLayer.arm_clearance``): remembers what the rays
+    hit and tells whether a joint step keeps the blind links clear of it. Made where the
+    scene's joints are at the start."""
+
+    def __init__(self, links: ArmCapsules, clearance: float, steps: int) -> None:
+        self.scene = links.scene
+        self.links = links
+        self.clearance = clearance
+        self.seen = SeenPoints(steps)
+        self._ends = self.links.world()  # where the last allowed step left the capsules
+
+    def allows(self, q_now: np.ndarray, q: np.ndarray) -> bool:
+        """Whether moving the joints from ``q_now`` (where the last allowed step left them)
+        to ``q`` keeps every blind link ``clearance`` from what the rays have seen, or brings
+        none nearer than it is now. Leaves the scene's joints at ``q`` or ``q_now``."""
+        self.scene.set_joints(q)
+        ends = self.links.world()
+        points = self.seen.points()
+        after = self.links.clearance(points, self.clearance, ends)
+        if after < self.clearance:
+            self.scene.set_joints(q_now)
+            if after < self.links.clearance(points, self.clearance, self._ends):
+                return False
+        self._ends = ends
+        return True
 
 
 _CELL_OFFSET = 1 << 20

@@ -50,7 +50,7 @@ import gymnasium as gym
 import numpy as np
 
 from rayreach import rewards as R
-from rayreach.arm_guard import ArmCapsules, SeenPoints
+from rayreach.arm_guard import ArmCapsules, ArmGuard
 from rayreach.kinematics import IKParams, Kinematics
 from rayreach.policy import FinalApproach
 from rayreach.robots import RobotSpec, get_robot
@@ -172,7 +172,7 @@ class ReachEnv(gym.Env):
         self.kin = Kinematics(self.spec_robot, base_pos, base_rpy)
         self.scene = Scene(self.spec_robot, base_pos, base_rpy, gui=render_mode == "human")
         self.rays = RayModel(self.spec_robot, self.config.ray_range)
-        self._arm = ArmCapsules(self.scene, self.spec_robot.blind_links)
+        self._blind_links = ArmCapsules(self.scene, self.spec_robot.blind_links)
         self.worlds = RandomWorlds(self.kin, self.scene, self.config.random_world) if self.random else None
         self.n_obstacles = self.config.random_world.n_obstacles
 
@@ -217,7 +217,7 @@ class ReachEnv(gym.Env):
         (remembering hits from then on)."""
         self.config = make_config(self.config, {"safety": layer})
         self._hit_memory = HitMemory(layer.memory_steps)
-        self._seen = SeenPoints(layer.arm_memory_steps)
+        self._arm_guard = ArmGuard(self._blind_links, layer.arm_clearance, layer.arm_memory_steps)
 
     @property
     def final_approach(self) -> FinalApproach | None:
@@ -259,7 +259,7 @@ class ReachEnv(gym.Env):
         self.time = 0.0
         self._shake.reset()
         self._hit_memory = HitMemory(self.config.safety.memory_steps)
-        self._seen = SeenPoints(self.config.safety.arm_memory_steps)
+        self._arm_guard = ArmGuard(self._blind_links, self.config.safety.arm_clearance, self.config.safety.arm_memory_steps)
         self._ready = True
         distance = float(np.linalg.norm(self.goals[0] - self.ee_pos))
         self._previous_distance = distance
@@ -315,7 +315,7 @@ class ReachEnv(gym.Env):
         # an unconverged IK step may move the tool where the layer did not let it: then it holds still
         taken = rules is None or ik.converged or cfg.safety.allows(ee[:3, 3] - self.ee_pos, *rules)
         if taken and cfg.safety.arm_clearance > 0:
-            taken = self._arm_keeps_clear(ik.q, cfg.safety.arm_clearance)
+            taken = self._arm_guard.allows(self.q, ik.q)  # moves the scene's joints; set again below
         if taken:
             self.q, self.frames = ik.q, ik.frames
             self.ee_pos, self.ee_rot = ee[:3, 3], ee[:3, :3]
@@ -389,21 +389,7 @@ class ReachEnv(gym.Env):
     def _remember_hits(self) -> None:
         """Keep what the rays hit now for the arm's rule (``SafetyLayer.arm_clearance``)."""
         if self.config.safety.arm_clearance > 0:
-            self._seen.add(self.ray_hits() + self.ee_pos)
-
-    def _arm_keeps_clear(self, q: np.ndarray, clearance: float) -> bool:
-        """Whether moving the joints to ``q`` keeps every arm link ``clearance`` from what the
-        rays have seen, or brings none nearer than it is now (``SafetyLayer.arm_clearance``).
-        Moves the scene's joints; ``step`` sets them afterwards."""
-        points = self._seen.points()
-        if not len(points):
-            return True
-        self.scene.set_joints(q)
-        after = self._arm.clearance(points, clearance)
-        if after >= clearance:
-            return True
-        self.scene.set_joints(self.q)
-        return after >= self._arm.clearance(points, clearance)
+            self._arm_guard.seen.add(self.ray_hits() + self.ee_pos)
 
     def ray_hits(self) -> np.ndarray:
         """The points the rays see now, relative to the end effector, m, shape (n, 3); rays
