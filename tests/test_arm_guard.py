@@ -6,18 +6,13 @@ import numpy as np
 import pybullet as p
 import pytest
 
-from rayreach.arm_guard import PAD, PROBE, VOXEL, ArmCapsules, SeenPoints, _capsule, _first_per_cell, segment_distances
+from rayreach.arm_guard import PAD, PROBE, VOXEL, ArmCapsules, SeenPoints, _capsule, _first_per_cell
 from rayreach.env import ReachEnv
+from rayreach.policy import distances_to_segment
 from rayreach.robots import get_robot
 from rayreach.robots.urdf import TCP_LINK, TOOL_LINK
 from rayreach.safety import SafetyLayer
 from rayreach.scene import Scene
-
-
-def test_segment_distances_match_hand_geometry():
-    a, b = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]), np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
-    points = np.array([[0.5, 0.3, 0.0], [-0.3, 0.4, 0.0], [2.0, 0.0, 0.0]])
-    np.testing.assert_allclose(segment_distances(points, a, b), [[0.3, np.hypot(0.5, 0.3)], [0.5, 0.5], [1.0, 2.0]])
 
 
 def test_a_fitted_capsule_holds_a_cylinders_points_and_no_more_than_needed():
@@ -53,7 +48,7 @@ def test_capsules_are_never_nearer_than_pybullet_says_the_link_is(robot):
                     close = p.getClosestPoints(scene.robot, -1, 1.0, linkIndexA=link, collisionShapeB=probe,
                                                collisionShapePositionB=point.tolist(), physicsClientId=scene.client)
                     truth = min(c[8] for c in close) if close else 1.0
-                    ours = float(segment_distances(point[None], a[k:k + 1], b[k:k + 1])[0, 0] - capsules.radii[k])
+                    ours = float(distances_to_segment(point[None], a[k], b[k] - a[k])[0] - capsules.radii[k])
                     assert ours <= truth + PAD  # PyBullet pads its meshes by about a millimetre
                     assert truth >= 0 or ours < 0
     finally:

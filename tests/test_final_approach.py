@@ -11,7 +11,7 @@ import pytest
 
 from exp1_scenes import exp1_around_the_tool
 from rayreach.env import N_ROBOT_OBS, ReachEnv
-from rayreach.policy import FinalApproach, distances_to_parallelogram
+from rayreach.policy import FinalApproach, distances_to_parallelogram, distances_to_segment
 from rayreach.robots import get_robot
 from rayreach.safety import ACTING_SAFETY
 from rayreach.scenarios.schema import ObstacleSpec
@@ -333,3 +333,10 @@ def test_a_straight_step_lets_the_orientation_go_when_ik_cannot_keep_it(policy_s
             assert env.ee_pos[0] - start[0] == pytest.approx(0.005, abs=2e-4)  # a full step along x
     finally:
         env.close()
+
+
+def test_distances_to_a_segment_match_hand_geometry():
+    """Beside the segment, past either end, and a zero segment (a point)."""
+    points = np.array([[0.5, 0.3, 0.0], [-0.3, 0.4, 0.0], [2.0, 0.0, 0.0]])
+    np.testing.assert_allclose(distances_to_segment(points, np.zeros(3), np.array([1.0, 0.0, 0.0])), [0.3, 0.5, 1.0])
+    np.testing.assert_allclose(distances_to_segment(points, np.zeros(3), np.zeros(3)), [np.hypot(0.5, 0.3), 0.5, 2.0])

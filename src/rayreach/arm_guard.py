@@ -17,6 +17,7 @@ from collections import deque
 import numpy as np
 import pybullet as p
 
+from rayreach.policy import distances_to_segment
 from rayreach.scene import Scene
 
 VOXEL = 0.005
@@ -37,16 +38,7 @@ def _capsule(vertices: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
     axis = np.linalg.svd(vertices - centre, full_matrices=False)[2][0]
     along = (vertices - centre) @ axis
     a, b = centre + along.min() * axis, centre + along.max() * axis
-    return a, b, float(segment_distances(vertices, a[None], b[None]).max())
-
-
-def segment_distances(points: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Distance of each point (n, 3) to each segment from ``a[k]`` to ``b[k]`` (k, 3): (n, k)."""
-    d = b - a
-    rel = points[:, None, :] - a[None]
-    length2 = np.maximum((d * d).sum(axis=1), 1e-18)
-    t = np.clip((rel * d[None]).sum(axis=2) / length2, 0.0, 1.0)
-    return np.linalg.norm(rel - t[..., None] * d[None], axis=2)
+    return a, b, float(distances_to_segment(vertices, a, b - a).max())
 
 
 class ArmCapsules:
@@ -98,7 +90,7 @@ class ArmCapsules:
         middle, half = (a + b) / 2, np.linalg.norm(b - a, axis=1) / 2
         square = (points * points).sum(axis=1)[:, None] - 2 * points @ middle.T + (middle * middle).sum(axis=1)[None]
         points = points[(square < (half + self.radii + within)[None] ** 2).any(axis=1)]
-        bound = segment_distances(points, a, b) - self.radii[None]
+        bound = np.stack([distances_to_segment(points, a[k], b[k] - a[k]) for k in range(len(a))], axis=1) - self.radii[None]
         best = within
         for k in np.flatnonzero((bound < within).any(axis=0)):
             order = np.argsort(bound[:, k])
