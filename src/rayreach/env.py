@@ -216,8 +216,7 @@ class ReachEnv(gym.Env):
         """Pass each action through ``layer`` (``SafetyLayer()``: off) from the next step on
         (remembering hits from then on)."""
         self.config = make_config(self.config, {"safety": layer})
-        self._hit_memory = HitMemory(layer.memory_steps)
-        self._arm_guard = ArmGuard(self._blind_links, layer.arm_clearance, layer.arm_memory_steps)
+        self._start_memories()
 
     @property
     def final_approach(self) -> FinalApproach | None:
@@ -258,8 +257,7 @@ class ReachEnv(gym.Env):
         self.steps = 0
         self.time = 0.0
         self._shake.reset()
-        self._hit_memory = HitMemory(self.config.safety.memory_steps)
-        self._arm_guard = ArmGuard(self._blind_links, self.config.safety.arm_clearance, self.config.safety.arm_memory_steps)
+        self._start_memories()
         self._ready = True
         distance = float(np.linalg.norm(self.goals[0] - self.ee_pos))
         self._previous_distance = distance
@@ -314,7 +312,7 @@ class ReachEnv(gym.Env):
         ee = self.kin.ee_from_frames(ik.frames)
         # an unconverged IK step may move the tool where the layer did not let it: then it holds still
         taken = rules is None or ik.converged or cfg.safety.allows(ee[:3, 3] - self.ee_pos, *rules)
-        if taken and cfg.safety.arm_clearance > 0:
+        if taken and self._arm_guard is not None:
             taken = self._arm_guard.allows(self.q, ik.q)  # moves the scene's joints; set again below
         if taken:
             self.q, self.frames = ik.q, ik.frames
@@ -386,9 +384,17 @@ class ReachEnv(gym.Env):
         self._ray_fractions = self.caster.cast(self._ray_origins, self._ray_directions, self.config.ray_range)
         return self._ray_fractions
 
+    def _start_memories(self) -> None:
+        """Empty memories for the safety layer's shield and, when it is on, its arm's rule
+        (which starts from the scene's joints as they are)."""
+        layer = self.config.safety
+        self._hit_memory = HitMemory(layer.memory_steps)
+        self._arm_guard = (ArmGuard(self._blind_links, layer.arm_clearance, layer.arm_memory_steps)
+                           if layer.arm_clearance > 0 else None)
+
     def _remember_hits(self) -> None:
         """Keep what the rays hit now for the arm's rule (``SafetyLayer.arm_clearance``)."""
-        if self.config.safety.arm_clearance > 0:
+        if self._arm_guard is not None:
             self._arm_guard.seen.add(self.ray_hits() + self.ee_pos)
 
     def ray_hits(self) -> np.ndarray:
