@@ -63,7 +63,7 @@ def test_shipped_ur5_policy_reaches_both_goals_of_exp2():
 def test_shipped_json_names_the_demonstrations_cloned_into_the_policy(robot, kind):
     meta = json.loads((MODELS_DIR / f"{robot}.json").read_text())
     assert [d["kind"] for d in meta["demonstrations"]] == [kind]
-    assert meta["demonstrations"][0]["timesteps"] == meta["timesteps"]
+    assert meta["demonstrations"][0]["timesteps"] <= meta["timesteps"]  # PPO may go on after cloning
 
 
 def test_shipped_kr16_policy_reaches_exp4_at_the_true_goal_size():
