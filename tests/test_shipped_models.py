@@ -63,6 +63,8 @@ def test_shipped_ur5_policy_reaches_both_goals_of_exp2():
 def test_shipped_json_names_the_demonstrations_cloned_into_the_policy(robot, kind):
     meta = json.loads((MODELS_DIR / f"{robot}.json").read_text())
     assert [d["kind"] for d in meta["demonstrations"]] == [kind]
+    # the KR16's last parts were trained as it acts, one obstacle per world; the UR5's were not
+    assert ("--acting-layers --obstacles 1" in meta["command"]) == (robot == "kr16")
     assert meta["demonstrations"][0]["timesteps"] <= meta["timesteps"]  # PPO may go on after cloning
 
 

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from rayreach.curriculum import AugmentedGoalSize, ObstacleCurriculum
-from rayreach.policy import CheckpointError, load_policy, read_bundle_meta
+from rayreach.policy import CheckpointError, load_policy, read_bundle_meta, train_command
 from rayreach.train import TrainState, append_curve
 
 RAYREACH = [sys.executable, "-m", "rayreach.cli"]
@@ -135,3 +135,14 @@ def test_the_update_uses_no_more_threads_than_the_run_has_workers():
     assert update_threads(TrainConfig(workers=1), 2) == 1
     assert update_threads(TrainConfig(workers=2), 2) == 2
     assert update_threads(TrainConfig(workers=4), 2) == 2
+
+
+def test_exported_command_keeps_the_flags_a_resume_keeps():
+    base = {"robot": "kr16", "timesteps": 17100000, "envs": 32, "checkpoint_every": 250000,
+            "obstacles": {"start": 1, "minimum": 0, "maximum": 3}}
+    plain = train_command(base, "models/train-kr16")
+    assert plain == ("rayreach train --robot kr16 --timesteps 17100000 --envs 32 --out models/train-kr16 "
+                     "--checkpoint-every 250000 [--resume]")
+    fixed = {**base, "acting_layers": True, "obstacles": {"start": 1, "minimum": 1, "maximum": 1}}
+    assert train_command(fixed, "RUN").endswith("--checkpoint-every 250000 --acting-layers --obstacles 1 [--resume]")
+

@@ -293,6 +293,21 @@ def load_policy(path: str | Path, device: str = "cpu") -> Policy:
     return Policy(model, Normalization.from_arrays(norm), meta, Path(path))
 
 
+def train_command(config: dict, out: str | Path) -> str:
+    """The ``rayreach train`` command line a run's saved configuration stands for, with the
+    flags that stay on through ``--resume`` (acting layers, a fixed obstacle count); flags
+    given to one part only (``--freeze-features``, ``--critic-warmup``) are not saved."""
+    c = config
+    command = (f"rayreach train --robot {c['robot']} --timesteps {c['timesteps']} --envs {c['envs']} "
+               f"--out {out} --checkpoint-every {c['checkpoint_every']}")
+    if c.get("acting_layers"):
+        command += " --acting-layers"
+    obstacles = c.get("obstacles", {})
+    if obstacles and obstacles["minimum"] == obstacles["maximum"] == obstacles["start"]:
+        command += f" --obstacles {obstacles['start']}"
+    return command + " [--resume]"
+
+
 def export_bundle(source: str | Path, target: str | Path) -> tuple[Path, Path]:
     """Copy a run's model (or its latest checkpoint) to ``target`` and write the metadata
     beside it as ``target`` with a .json suffix: what a shipped policy carries."""
@@ -310,9 +325,7 @@ def export_bundle(source: str | Path, target: str | Path) -> tuple[Path, Path]:
     shutil.copyfile(source, target)
     info = {k: meta.get(k) for k in ("robot", "kind", "timesteps", "wall_time_s", "machine", "git_commit", "command")}
     if not info["command"]:  # checkpoints do not record the command line; this reproduces the run
-        c = meta["config"]
-        info["command"] = (f"rayreach train --robot {c['robot']} --timesteps {c['timesteps']} --envs {c['envs']} "
-                           f"--out {source.parent} --checkpoint-every {c['checkpoint_every']} [--resume]")
+        info["command"] = train_command(meta["config"], source.parent)
     info["source"] = str(source)
     info["curriculum"] = {"goal_size": meta["state"]["goal"]["size"], "obstacles": meta["state"]["obstacles"]["count"],
                           "episodes": meta["state"]["episodes"]}
