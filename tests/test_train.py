@@ -145,4 +145,3 @@ def test_exported_command_keeps_the_flags_a_resume_keeps():
                      "--checkpoint-every 250000 [--resume]")
     fixed = {**base, "acting_layers": True, "obstacles": {"start": 1, "minimum": 1, "maximum": 1}}
     assert train_command(fixed, "RUN").endswith("--checkpoint-every 250000 --acting-layers --obstacles 1 [--resume]")
-

@@ -297,12 +297,11 @@ def train_command(config: dict, out: str | Path) -> str:
     """The ``rayreach train`` command line a run's saved configuration stands for, with the
     flags that stay on through ``--resume`` (acting layers, a fixed obstacle count); flags
     given to one part only (``--freeze-features``, ``--critic-warmup``) are not saved."""
-    c = config
-    command = (f"rayreach train --robot {c['robot']} --timesteps {c['timesteps']} --envs {c['envs']} "
-               f"--out {out} --checkpoint-every {c['checkpoint_every']}")
-    if c.get("acting_layers"):
+    command = (f"rayreach train --robot {config['robot']} --timesteps {config['timesteps']} --envs {config['envs']} "
+               f"--out {out} --checkpoint-every {config['checkpoint_every']}")
+    if config.get("acting_layers"):
         command += " --acting-layers"
-    obstacles = c.get("obstacles", {})
+    obstacles = config.get("obstacles", {})
     if obstacles and obstacles["minimum"] == obstacles["maximum"] == obstacles["start"]:
         command += f" --obstacles {obstacles['start']}"
     return command + " [--resume]"
