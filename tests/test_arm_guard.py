@@ -100,10 +100,10 @@ def test_points_in_one_voxel_are_measured_once_the_first_kept():
     assert _first_per_cell(points).tolist() == [0, 1, 3]
 
 
-def _wrist_step(point_side: float, steps: int = 1, memory: int = 5) -> float:
-    """``steps`` +x steps of the KR16 in exp4 with one seen point placed 1.5 cm off the wrist's
-    surface on the side ``point_side`` (+1: where the steps go). Returns how far the tool
-    moved."""
+def _wrist_step(point_side: float, steps: int = 1, memory: int = 5, gap: float = 0.015) -> float:
+    """``steps`` +x steps of the KR16 in exp4 with one seen point placed ``gap`` off the
+    wrist's surface on the side ``point_side`` (+1: where the steps go), the rule's clearance
+    2 cm. Returns how far the tool moved."""
     env = ReachEnv(robot="kr16", scenario="exp4", safety=SafetyLayer(arm_clearance=0.02, arm_memory_steps=memory))
     try:
         env.reset(seed=0)
@@ -116,7 +116,7 @@ def _wrist_step(point_side: float, steps: int = 1, memory: int = 5) -> float:
         close = p.getClosestPoints(scene.robot, -1, 1.0, linkIndexA=link, collisionShapeB=probe,
                                    collisionShapePositionB=far.tolist(), physicsClientId=scene.client)
         surface = np.asarray(min(close, key=lambda c: c[8])[5])
-        env._arm_guard.seen.add((surface + 0.015 * outward)[None])
+        env._arm_guard.seen.add((surface + gap * outward)[None])
         before = env.ee_pos.copy()
         for _ in range(steps):
             _, _, _, _, info = env.step(np.array([1.0, 0, 0, 0, 0, 0], np.float32))
@@ -129,6 +129,14 @@ def test_a_step_that_sweeps_the_wrist_towards_a_seen_point_is_refused_and_one_aw
     assert _wrist_step(+1.0) == 0.0
     moved = _wrist_step(-1.0)
     assert moved == pytest.approx(0.005, abs=5e-4)
+
+
+def test_a_refused_step_is_taken_shorter_where_that_keeps_the_clearance():
+    """2.3 cm off the wrist, a full step would bring it within 2 cm; a share of it does not.
+    A deterministic policy would otherwise repeat the refused step until its budget ran out."""
+    moved = _wrist_step(+1.0, gap=0.023)
+    assert 0.005 * min(ReachEnv.SHORTER) - 5e-4 < moved < 0.005 * max(ReachEnv.SHORTER) + 5e-4
+    assert _wrist_step(+1.0, gap=0.035) == pytest.approx(0.005, abs=5e-4)  # far enough: the whole step
 
 
 def test_unknown_or_meshless_links_are_refused_by_name():

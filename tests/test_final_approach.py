@@ -22,8 +22,13 @@ NOTHING = np.zeros((0, 3))
 
 
 def test_steps_straight_only_within_the_radius():
+    """Along the offset, its largest axis a full step (the action's limit), so the step stays
+    on the path tested; clipping each axis would turn a goal 3 cm ahead and 2 mm aside into a
+    step 2 mm aside. Within a step of the goal, the step lands on it."""
     np.testing.assert_allclose(APPROACH.action(np.array([0.03, -0.002, 0.0]), NOTHING),
-                               [1.0, -0.4, 0.0, 0.0, 0.0, 0.0], atol=1e-6)
+                               [1.0, -0.2 / 3, 0.0, 0.0, 0.0, 0.0], atol=1e-6)
+    np.testing.assert_allclose(APPROACH.action(np.array([0.003, 0.0, -0.001]), NOTHING),
+                               [0.6, 0.0, -0.2, 0.0, 0.0, 0.0], atol=1e-6)
     assert APPROACH.action(np.array([0.11, 0.0, 0.0]), NOTHING) is None
 
 

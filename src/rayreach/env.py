@@ -51,7 +51,7 @@ import numpy as np
 
 from rayreach import rewards as R
 from rayreach.arm_guard import ArmCapsules, ArmGuard
-from rayreach.kinematics import IKParams, Kinematics
+from rayreach.kinematics import IKParams, IKResult, Kinematics
 from rayreach.policy import FinalApproach
 from rayreach.robots import RobotSpec, get_robot
 from rayreach.safety import HitMemory, SafetyLayer
@@ -302,18 +302,13 @@ class ReachEnv(gym.Env):
             if straight is None and not stalled:  # neither step is the policy's choice
                 shielded = R.shielded_reward(commanded, delta[:3], w)
 
-        target_pos = self.ee_pos + delta[:3]
-        target_rot = rotvec_to_matrix(delta[3:]) @ self.ee_rot
-        ik = self.kin.ik(target_pos, target_rot, self.q, cfg.ik, start_frames=self.frames)
-        if not ik.converged and straight is not None:
-            # the final approach moves the tip and keeps the tool's orientation only where IK
-            # can: a pose out of its reach stopped a KR16 tool 8 cm short of its goal for good
-            ik = self.kin.ik(target_pos, None, self.q, cfg.ik, start_frames=self.frames)
-        ee = self.kin.ee_from_frames(ik.frames)
-        # an unconverged IK step may move the tool where the layer did not let it: then it holds still
-        taken = rules is None or ik.converged or cfg.safety.allows(ee[:3, 3] - self.ee_pos, *rules)
-        if taken and self._arm_guard is not None:
-            taken = self._arm_guard.allows(self.q, ik.q)  # moves the scene's joints; set again below
+        ik, ee, taken = self._move(delta, straight is not None, rules)
+        for share in self.SHORTER if taken is None else ():
+            # the arm's rule refused the step: a deterministic policy would repeat it, held, until
+            # its step budget ran out (a KR16 tool stopped 0.5 mm short of the goal's tolerance)
+            ik, ee, taken = self._move(delta * share, straight is not None, rules)
+            if taken:
+                break
         if taken:
             self.q, self.frames = ik.q, ik.frames
             self.ee_pos, self.ee_rot = ee[:3, 3], ee[:3, :3]
@@ -376,6 +371,30 @@ class ReachEnv(gym.Env):
             "time": self.time,
         }
         return self._observation(distance, rays), float(sum(terms.values())), terminated, truncated, info
+
+    SHORTER = (0.5, 0.25, 0.125)
+    """Shares of a step the arm's rule refused that are tried in turn, the longest first:
+    a shorter step may keep every blind link outside the rule's clearance."""
+
+    def _move(self, delta: np.ndarray, straight: bool, rules: tuple | None) -> tuple[IKResult, np.ndarray, bool | None]:
+        """IK for the end-effector step ``delta``: the solution, its tool pose, and whether the
+        step may be taken (True), not (False), or not by the arm's rule alone (None). Leaves
+        the scene's joints where they were or at the solution."""
+        cfg = self.config
+        target_pos = self.ee_pos + delta[:3]
+        target_rot = rotvec_to_matrix(delta[3:]) @ self.ee_rot
+        ik = self.kin.ik(target_pos, target_rot, self.q, cfg.ik, start_frames=self.frames)
+        if not ik.converged and straight:
+            # the final approach moves the tip and keeps the tool's orientation only where IK
+            # can: a pose out of its reach stopped a KR16 tool 8 cm short of its goal for good
+            ik = self.kin.ik(target_pos, None, self.q, cfg.ik, start_frames=self.frames)
+        ee = self.kin.ee_from_frames(ik.frames)
+        # an unconverged IK step may move the tool where the layer did not let it: then it holds still
+        if not (rules is None or ik.converged or cfg.safety.allows(ee[:3, 3] - self.ee_pos, *rules)):
+            return ik, ee, False
+        if self._arm_guard is not None and not self._arm_guard.allows(self.q, ik.q):  # moves the scene's joints
+            return ik, ee, None
+        return ik, ee, True
 
     def _cast_rays(self) -> np.ndarray:
         """Hit fractions of the rays in the current state (kept, with the rays, for the

@@ -226,8 +226,10 @@ class FinalApproach:
                 now = distances_to_segment(hits, np.zeros(3), back).min()  # the tool where it is
                 if on_path < now - self.NEARER:
                     return None
+        # along the path tested, not clipped axis by axis: a goal 10 cm below and 1 cm aside
+        # took steps of 5 mm down and 5 mm aside, towards a wall beside the goal
         action = np.zeros(6, dtype=np.float32)
-        action[:3] = np.clip(goal_offset / self.ee_step, -1.0, 1.0)
+        action[:3] = goal_offset / max(float(np.abs(goal_offset).max()), self.ee_step)
         return action
 
 
