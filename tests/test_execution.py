@@ -108,6 +108,12 @@ class StraightToGoal(ReactivePlanner):
 
     name = "straight"
 
+    def __init__(self) -> None:
+        self.seeds: list[int] = []
+
+    def reset(self, seed: int) -> None:
+        self.seeds.append(seed)
+
     def act(self, observation: np.ndarray) -> np.ndarray:
         offset = observation[6:9]
         return np.concatenate((np.clip(offset / 0.005, -1, 1), np.zeros(3))).astype(np.float32)
@@ -118,8 +124,11 @@ class StraightToGoal(ReactivePlanner):
 
 def test_a_reactive_planner_runs_through_the_env_and_is_measured_alike():
     scenario = dataclasses.replace(get_scenario("exp1"), obstacles=())
+    planner = StraightToGoal()
     with Executor(scenario) as ex:
-        record = ex.run(StraightToGoal(), seed=0)
+        record = ex.run(planner, seed=0)
+        ex.run(planner, seed=7)
+    assert planner.seeds == [0, 7]  # each run starts the planner with its seed
     assert record.outcome == "success" and record.plan_status == "solved"
     assert record.planning_time > 0 and record.motion_time == pytest.approx(record.steps * PERIOD)
     assert record.path_length == pytest.approx(0.3, abs=0.02)  # start and goal are 0.3 m apart

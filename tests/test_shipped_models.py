@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import functools
 import json
+import math
 from pathlib import Path
+from statistics import NormalDist
 
 import numpy as np
 import pytest
@@ -13,7 +15,7 @@ from rayreach.env import ReachEnv
 from rayreach.execution import Executor
 from rayreach.planners import make_planner
 from rayreach.planners.drl import MODELS_DIR
-from rayreach.policy import FinalApproach
+from rayreach.policy import ActingPolicy, FinalApproach, load_policy
 from rayreach.robots import get_robot
 
 CASES = [("ur5", "exp1"), ("kr16", "exp4")]
@@ -108,7 +110,6 @@ def test_rollout_counts_outcomes_per_world_kind():
     """``rollout`` on random worlds: the outcomes add up to the episodes, and each kind's
     counts are those of the worlds that drew it (the same worlds, replayed one by one)."""
     from rayreach.env import episode_outcome
-    from rayreach.policy import load_policy
     from rayreach.rollout import EVAL_SEED_OFFSET, rollout
     from rayreach.safety import ACTING_SAFETY
     from rayreach.scenarios.random_world import world_kinds
@@ -116,6 +117,7 @@ def test_rollout_counts_outcomes_per_world_kind():
     summary = rollout(MODELS_DIR / "kr16.zip", "random", episodes=4, progress=False)
     assert sum(summary.outcomes.values()) == 4 and summary.outcomes["success"] == summary.successes
     policy = load_policy(MODELS_DIR / "kr16.zip")
+    acting = ActingPolicy(policy)
     env = ReachEnv(robot="kr16", scenario="random", goal_tolerance=0.01, safety=ACTING_SAFETY,
                    final_approach=FinalApproach())
     env.set_n_obstacles(policy.meta["state"]["obstacles"]["count"])
@@ -123,9 +125,10 @@ def test_rollout_counts_outcomes_per_world_kind():
     try:
         for episode in range(4):
             obs, _ = env.reset(seed=EVAL_SEED_OFFSET + episode)
+            acting.reset(EVAL_SEED_OFFSET + episode)
             done = False
             while not done:
-                obs, _, terminated, truncated, info = env.step(policy.act(obs))
+                obs, _, terminated, truncated, info = env.step(acting.act(obs))
                 done = terminated or truncated
             for kind in world_kinds(env.scenario):
                 counts = expected.setdefault(kind, {"episodes": 0, "success": 0, "collision": 0,
@@ -135,3 +138,57 @@ def test_rollout_counts_outcomes_per_world_kind():
     finally:
         env.close()
     assert summary.by_kind == dict(sorted(expected.items()))
+
+
+def _exp1_start_observation() -> np.ndarray:
+    env = ReachEnv(robot="ur5", scenario="exp1")
+    try:
+        return env.reset(seed=0)[0]
+    finally:
+        env.close()
+
+
+def _clipped_normal_mean(m: float, s: float) -> float:
+    """E[clip(X, -1, 1)] for X ~ N(m, s^2)."""
+    z = NormalDist()
+    a, b = (-1.0 - m) / s, (1.0 - m) / s
+    return -z.cdf(a) + (1.0 - z.cdf(b)) + m * (z.cdf(b) - z.cdf(a)) + s * (z.pdf(a) - z.pdf(b))
+
+
+def test_a_drawn_action_follows_the_policys_gaussian_clipped_to_the_action_space():
+    """Against SB3's own mean action and the policy's log standard deviation: per action
+    axis whose mean lies inside the bounds, the draws average what a Gaussian clipped to
+    [-1, 1] averages."""
+    policy = load_policy(MODELS_DIR / "ur5.zip")
+    obs = _exp1_start_observation()
+    mean = policy.act(obs, deterministic=True)
+    std = np.exp(policy.model.policy.log_std.detach().numpy())
+    inside = np.flatnonzero(np.abs(mean) < 0.999)
+    assert len(inside) >= 2
+    rng = np.random.default_rng(0)
+    draws = np.array([policy.sample(obs, rng) for _ in range(2000)])
+    assert np.all(np.abs(draws) <= 1.0)
+    for k in inside:
+        assert abs(draws[:, k].mean() - _clipped_normal_mean(float(mean[k]), float(std[k]))) < 4 * std[k] / math.sqrt(2000)
+
+
+def test_the_acting_policy_draws_only_on_a_repeated_observation_and_repeats_with_its_seed():
+    policy = load_policy(MODELS_DIR / "ur5.zip")
+    obs = _exp1_start_observation()
+    other = obs.copy()
+    other[6] += 0.01  # the goal 1 cm further along x
+    acting = ActingPolicy(policy)
+
+    def run(seed: int) -> list[np.ndarray]:
+        acting.reset(seed)
+        return [acting.act(o) for o in (obs, other, other, other, obs)]
+
+    actions = run(3)
+    for i, o in ((0, obs), (1, other), (4, obs)):  # a new observation: the mean
+        np.testing.assert_array_equal(actions[i], policy.act(o, deterministic=True))
+    assert not np.allclose(actions[2], actions[1]) and not np.allclose(actions[3], actions[2])  # drawn, and anew
+    np.testing.assert_array_equal(np.array(run(3)), np.array(actions))
+    assert not np.allclose(run(4)[2], actions[2])
+    bare = ActingPolicy(policy, resample=False)
+    bare.reset(3)
+    np.testing.assert_array_equal(bare.act(other), bare.act(other))

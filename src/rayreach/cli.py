@@ -139,6 +139,9 @@ def build_parser() -> argparse.ArgumentParser:
     roll.add_argument("--arm-clearance", type=float, default=ACTING_SAFETY.arm_clearance,
                       help="refuse steps that bring an arm link nearer than this to what the rays saw in the last "
                            f"{ACTING_SAFETY.arm_memory_steps} steps, m (0: off; rayreach.arm_guard)")
+    roll.add_argument("--no-resample", action="store_true",
+                      help="act on the policy's mean action even where the arm is held and the observation repeats "
+                           "(rayreach.policy.ActingPolicy)")
     roll.add_argument("--seed", type=int, default=None, help="seed of the first random world (default 1000000)")
     roll.add_argument("--json", action="store_true", help="print one JSON line")
 
@@ -388,7 +391,7 @@ def _rollout(args: argparse.Namespace, scenario: str) -> int:
                       goal_tolerance=args.tolerance, n_obstacles=args.obstacles, progress=not args.json,
                       final_approach=None if args.no_final_approach
                       else FinalApproach(args.final_approach_radius, stall_steps=args.stall_steps),
-                      safety=safety,
+                      safety=safety, resample=not args.no_resample,
                       seed=EVAL_SEED_OFFSET if args.seed is None else args.seed)
     if args.json:
         print(json.dumps({"scenario": scenario, **summary.to_dict()}))

@@ -211,6 +211,7 @@ class Executor:
     def _run_reactive_steps(self, planner: ReactivePlanner, seed: int) -> RunRecord:
         env = self.env
         obs, info = env.reset(seed=seed)
+        planner.reset(seed)
         ee, joints = [info["ee_position"]], [env.q.copy()]
         compute = 0.0
         done = False

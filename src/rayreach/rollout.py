@@ -9,7 +9,7 @@ import numpy as np
 from tqdm import tqdm
 
 from rayreach.env import OUTCOMES, ReachEnv, episode_outcome
-from rayreach.policy import FinalApproach, load_policy
+from rayreach.policy import ActingPolicy, FinalApproach, load_policy
 from rayreach.safety import ACTING_SAFETY, SafetyLayer
 from rayreach.scenarios import RANDOM
 from rayreach.scenarios.random_world import world_kinds
@@ -30,6 +30,8 @@ class RolloutSummary:
     collisions: int
     deterministic: bool
     final_approach: bool
+    resample: bool
+    """Whether a held arm's repeated observation drew its action (``ActingPolicy``)."""
     safety: dict[str, float]
     outcomes: dict[str, int] = field(default_factory=dict)
     """Episodes per outcome: success, collision, out_of_bounds, timeout."""
@@ -60,11 +62,13 @@ def rollout(
     progress: bool = True,
     final_approach: FinalApproach | None = FinalApproach(),
     safety: SafetyLayer = ACTING_SAFETY,
+    resample: bool = True,
 ) -> RolloutSummary:
     """``episodes`` episodes of the policy at ``goal_tolerance``. Random worlds use the
     final obstacle count of training unless ``n_obstacles`` is given. ``final_approach``
-    None and ``SafetyLayer()`` measure the policy alone."""
+    None, ``SafetyLayer()`` and ``resample`` False measure the policy alone."""
     policy = load_policy(model)
+    acting = ActingPolicy(policy, resample=resample)
     env = ReachEnv(robot=policy.robot, scenario=scenario, goal_tolerance=goal_tolerance,
                    safety=safety, final_approach=final_approach)
     if scenario == RANDOM:
@@ -74,10 +78,12 @@ def rollout(
     try:
         for episode in tqdm(range(episodes), desc=f"rollout {scenario}", disable=not progress, leave=False):
             obs, info = env.reset(seed=seed + episode)
+            acting.reset(seed + episode)
             path = [info["ee_position"]]
             done = False
             while not done:
-                obs, _, terminated, truncated, info = env.step(policy.act(obs, deterministic))
+                action = acting.act(obs) if deterministic else policy.act(obs, deterministic=False)
+                obs, _, terminated, truncated, info = env.step(action)
                 path.append(info["ee_position"])
                 done = terminated or truncated
             length = float(np.linalg.norm(np.diff(np.asarray(path), axis=0), axis=1).sum())
@@ -100,6 +106,7 @@ def rollout(
         collisions=collisions,
         deterministic=deterministic,
         final_approach=final_approach is not None,
+        resample=resample and deterministic,
         safety=asdict(safety),
         outcomes=_count(records),
         by_kind={kind: {"episodes": sum(kind in r["kinds"] for r in records),

@@ -37,6 +37,9 @@ class ReactivePlanner(ABC):
     """False: the executor runs the actions as they come, without its final approach and
     safety layer (``ExecutionConfig``), as the paper's agent acted."""
 
+    def reset(self, seed: int) -> None:
+        """Called before each run with the run's seed (for a planner that draws at random)."""
+
     @abstractmethod
     def act(self, observation: np.ndarray) -> np.ndarray:
         """The action for this control step."""

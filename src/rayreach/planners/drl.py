@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 
 from rayreach.planners.base import ReactivePlanner
-from rayreach.policy import load_policy
+from rayreach.policy import ActingPolicy, load_policy
 
 MODELS_DIR = Path(__file__).resolve().parents[3] / "models"
 """The repository's shipped policies (``models/ur5.zip``, ``models/kr16.zip``)."""
@@ -36,15 +36,23 @@ class DRLPlanner(ReactivePlanner):
         self.deterministic = deterministic
         self.acting_layers = acting_layers
         self.name = "drl" if acting_layers else "drl-alone"
+        # drawing anew where the arm is held is part of acting; the bare policy repeats its mean
+        self._acting = ActingPolicy(self.policy, resample=acting_layers)
 
     @property
     def robot(self) -> str:
         return self.policy.robot
 
+    def reset(self, seed: int) -> None:
+        self._acting.reset(seed)
+
     def act(self, observation: np.ndarray) -> np.ndarray:
-        return self.policy.act(observation, self.deterministic)
+        if not self.deterministic:
+            return self.policy.act(observation, deterministic=False)
+        return self._acting.act(observation)
 
     def config(self) -> dict[str, Any]:
         meta = self.policy.meta
         return {"planner": self.name, "model": str(self.policy.path), "deterministic": self.deterministic,
+                "resample_held": self.deterministic and self._acting.resample,
                 "timesteps": meta.get("timesteps"), "git_commit": meta.get("git_commit")}
