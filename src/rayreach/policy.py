@@ -293,8 +293,8 @@ class ActingPolicy:
     """The policy as the planner acts with it: its mean action, except on an observation it
     has just acted on, where it draws one from its own distribution.
 
-    The observation repeats when the arm held still (the arm's rule refused the step) and
-    nothing in view moved. The mean action would then repeat too, and the arm stay held
+    The observation repeats when the arm held still (the arm's rule refused the step and
+    every shorter share of it) and nothing in view moved. The mean action would then repeat too, and the arm stay held
     until the step budget ran out: 17 of the KR16's 65 failures in 800 random worlds
     (docs/training.md, "Acting"). A drawn action goes through the same layers as any
     other. ``reset(seed)`` starts each run, so a seeded run repeats."""
