@@ -15,6 +15,7 @@ from rayreach.policy import FinalApproach, distances_to_parallelogram, distances
 from rayreach.robots import get_robot
 from rayreach.safety import ACTING_SAFETY
 from rayreach.scenarios.schema import ObstacleSpec
+from rayreach.transforms import rotvec_to_matrix
 from rayreach.train import TrainConfig, make_env_fn, set_trainable
 
 APPROACH = FinalApproach(radius=0.1, margin=0.02, ee_step=0.005)
@@ -75,10 +76,35 @@ def test_the_tool_behind_the_tip_must_clear_what_the_rays_see_too():
     offset, down = np.array([0.08, 0.0, 0.0]), np.array([0.0, 0.0, -1.0])
     hits = np.array([(0.04, 0.0, 0.06), (0.3, 0.3, 0.3)])
     assert APPROACH.action(offset, hits, down) is not None
-    tool = FinalApproach(radius=0.1, margin=0.02, ee_step=0.005, tool_length=0.13, tool_radius=0.02)
+    tool = FinalApproach(radius=0.1, margin=0.02, ee_step=0.005, tool_length=0.13, tool_radius=0.02, turn=False)
     assert tool.action(offset, hits, down) is None
     assert tool.action(offset, hits + [0.0, 0.045, 0.0], down) is not None  # 4.5 cm to the side: clear
     assert tool.action(offset, hits + [0.0, 0.035, 0.0], down) is None  # 3.5 cm: under 2 + 2 cm
+
+
+TOOL = FinalApproach(radius=0.1, margin=0.02, ee_step=0.005, rot_step=0.005, tool_length=0.13, tool_radius=0.02)
+
+
+def test_where_only_the_tools_back_blocks_the_path_the_tool_turns_about_its_tip_towards_it():
+    """The plate edge of the test above: the tip's own path is clear, so instead of the
+    refused step the tool turns, a full rotation step about -y, which tilts a downward tool
+    towards +x, the path; pointing along the path, it takes the straight step."""
+    offset, down = np.array([0.08, 0.0, 0.0]), np.array([0.0, 0.0, -1.0])
+    hits = np.array([(0.04, 0.0, 0.06), (0.3, 0.3, 0.3)])
+    np.testing.assert_allclose(TOOL.action(offset, hits, down), [0, 0, 0, 0, -1.0, 0], atol=1e-6)
+    turned = rotvec_to_matrix(np.array([0.0, -0.005, 0.0])) @ down
+    assert turned[0] > 0 and turned[2] < 0  # towards +x, still mostly down
+    np.testing.assert_allclose(TOOL.action(offset, hits, np.array([1.0, 0.0, 0.0])), [1.0, 0, 0, 0, 0, 0], atol=1e-6)
+    assert dataclasses.replace(TOOL, turn=False).action(offset, hits, down) is None
+
+
+@pytest.mark.parametrize("hit", [
+    (0.04, 0.0, 0.02),     # 2 cm above the tip's own path: under its 2 cm radius + 2 cm
+    (-0.03, 0.0, 0.13),    # 3 cm behind the tool's back, where turning towards +x swings it
+])
+def test_no_turn_where_the_tip_is_blocked_or_the_turn_swings_the_tool_nearer(hit):
+    hits = np.array([(0.04, 0.0, 0.06), hit])
+    assert TOOL.action(np.array([0.08, 0.0, 0.0]), hits, np.array([0.0, 0.0, -1.0])) is None
 
 
 def test_what_the_tool_is_already_near_blocks_only_a_path_that_comes_nearer():
@@ -92,7 +118,7 @@ def test_what_the_tool_is_already_near_blocks_only_a_path_that_comes_nearer():
     assert tool.action(np.array([0.06, 0.004, 0.0]), wall, down) is None  # 4 mm nearer
 
 
-@pytest.mark.parametrize("field,value", [("radius", 0.0), ("margin", -0.01), ("ee_step", float("nan")),
+@pytest.mark.parametrize("field,value", [("radius", 0.0), ("margin", -0.01), ("ee_step", float("nan")), ("rot_step", 0.0),
                                          ("tool_length", -0.1), ("tool_radius", -0.02), ("stall_steps", -1),
                                          ("stall_steps", 2.5), ("stall_gain", 0.0)])
 def test_bad_settings_are_refused_by_name(field, value):
@@ -250,10 +276,24 @@ def test_env_keeps_the_tool_body_off_a_plate_the_tips_path_passes_under():
         assert info["collision"]
     finally:
         env.close()
-    env = exp1_around_the_tool([_cover_over_the_path], np.array([0.08, 0.0, 0.0]), final_approach=FinalApproach())
+    env = exp1_around_the_tool([_cover_over_the_path], np.array([0.08, 0.0, 0.0]),
+                               final_approach=FinalApproach(turn=False))
     try:
         info = _idle(env)
         assert not info["collision"] and info["distance"] == pytest.approx(0.08, abs=1e-3)
+    finally:
+        env.close()
+
+
+def test_env_turns_the_tool_under_a_plate_its_back_would_strike_and_reaches_the_goal():
+    """The plate of the test above: turned about its tip towards the path (through the
+    shield, which keeps the final approach's turn), the tool slides in under the plate;
+    PyBullet finds no contact on the way."""
+    env = exp1_around_the_tool([_cover_over_the_path], np.array([0.08, 0.0, 0.0]), final_approach=FinalApproach())
+    try:
+        info = _idle(env, steps=400)
+        assert info["is_success"] and not info["collision"]
+        assert env.ee_rot[0, 2] > 0.5  # the tool leans towards the goal
     finally:
         env.close()
 

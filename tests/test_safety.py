@@ -30,6 +30,17 @@ def test_shield_drops_only_the_motion_towards_what_a_near_ray_sees():
     np.testing.assert_allclose(shield.filter(delta, INSIDE, LOW, HIGH, FAR, directions), delta)
 
 
+def test_shield_keeps_a_rotation_tested_against_the_rays_already():
+    """The final approach's turn (``keep_rotation``) passes a near ray; any other rotation
+    is dropped with it."""
+    shield = SafetyLayer(ray_shield=0.05)
+    turn = np.array([0.0, 0.0, 0.0, 0.0, -0.005, 0.0])
+    near = np.array([0.03, 0.4, 0.4])
+    directions = np.stack((X, Y, Z))
+    np.testing.assert_allclose(shield.filter(turn, INSIDE, LOW, HIGH, near, directions, keep_rotation=True), turn)
+    np.testing.assert_allclose(shield.filter(turn, INSIDE, LOW, HIGH, near, directions), np.zeros(6))
+
+
 def test_shield_handles_an_oblique_ray_and_several_near_rays():
     shield = SafetyLayer(ray_shield=0.05)
     diagonal = (X + Y) / np.sqrt(2)

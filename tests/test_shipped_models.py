@@ -43,8 +43,9 @@ def test_shipped_policy_loads_with_metadata_and_runs_an_episode(robot, scenario)
                                        "arm_clearance": 0.01, "arm_memory_steps": 100}  # the executor's defaults
     spec = get_robot(robot)  # the env fills in the robot's radius, step and tool
     assert record.config["final_approach"] == {"radius": spec.final_approach_radius, "margin": FinalApproach.margin,
-                                               "ee_step": 0.005, "tool_length": spec.tool.length,
-                                               "tool_radius": spec.tool.radius, "stall_steps": 0, "stall_gain": 0.01}
+                                               "ee_step": 0.005, "rot_step": spec.rot_step, "tool_length": spec.tool.length,
+                                               "tool_radius": spec.tool.radius, "stall_steps": 0, "stall_gain": 0.01,
+                                               "turn": True}
     assert np.isfinite(record.ee_path).all()
 
 
@@ -192,3 +193,15 @@ def test_the_acting_policy_draws_only_on_a_repeated_observation_and_repeats_with
     bare = ActingPolicy(policy, resample=False)
     bare.reset(3)
     np.testing.assert_array_equal(bare.act(other), bare.act(other))
+
+
+def test_the_kr16_turns_its_tool_to_reach_a_goal_beside_an_upright_plate():
+    """A random world (seed 1,000,035) with a plate 6 cm beside the goal: the tool, tilted
+    across the plate's edge, reaches the goal by turning towards its path; without the turn
+    the final approach is refused and the run times out."""
+    from rayreach.rollout import rollout
+
+    world = dict(episodes=1, seed=1_000_035, progress=False)
+    assert rollout(MODELS_DIR / "kr16.zip", "random", **world).outcomes["success"] == 1
+    assert rollout(MODELS_DIR / "kr16.zip", "random", final_approach=FinalApproach(turn=False),
+                   **world).outcomes["timeout"] == 1

@@ -123,6 +123,8 @@ def build_parser() -> argparse.ArgumentParser:
     roll.add_argument("--final-approach-radius", type=float, default=None,
                       help="distance to the goal within which the final approach may act, m (default: the robot's, "
                            "UR5 0.1, KR16 0.2)")
+    roll.add_argument("--no-turn", action="store_true",
+                      help="the final approach never turns the tool towards its path (FinalApproach.turn)")
     roll.add_argument("--stall-steps", type=int, default=FinalApproach.stall_steps,
                       help="step towards the goal once this many steps brought it less than 1 cm nearer "
                            "(default 0: off; 100 was measured, docs/training.md)")
@@ -390,7 +392,7 @@ def _rollout(args: argparse.Namespace, scenario: str) -> int:
     summary = rollout(args.model, scenario, episodes=args.episodes, deterministic=not args.stochastic,
                       goal_tolerance=args.tolerance, n_obstacles=args.obstacles, progress=not args.json,
                       final_approach=None if args.no_final_approach
-                      else FinalApproach(args.final_approach_radius, stall_steps=args.stall_steps),
+                      else FinalApproach(args.final_approach_radius, stall_steps=args.stall_steps, turn=not args.no_turn),
                       safety=safety, resample=not args.no_resample,
                       seed=EVAL_SEED_OFFSET if args.seed is None else args.seed)
     if args.json:

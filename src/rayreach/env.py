@@ -209,7 +209,8 @@ class ReachEnv(gym.Env):
         self.config = make_config(self.config, {"final_approach": approach})
         tool = self.spec_robot.tool
         self._final_approach = None if approach is None else replace(
-            approach, ee_step=self.spec_robot.ee_step, tool_length=tool.length, tool_radius=tool.radius,
+            approach, ee_step=self.spec_robot.ee_step, rot_step=self.spec_robot.rot_step,
+            tool_length=tool.length, tool_radius=tool.radius,
             radius=self.spec_robot.final_approach_radius if approach.radius is None else approach.radius)
 
     def set_safety(self, layer: SafetyLayer) -> None:
@@ -298,7 +299,8 @@ class ReachEnv(gym.Env):
             rules = (self.ee_pos, np.asarray(scenario.workspace_low), np.asarray(scenario.workspace_high),  # type: ignore[union-attr]
                      *self._hit_memory.rays(self.ee_pos, self._ray_origins, self._ray_directions,
                                             self._ray_fractions * cfg.ray_range, cfg.safety.ray_shield), travel)
-            delta = cfg.safety.filter(delta, *rules, towards_goal)
+            # the final approach's turn was tested against every hit: the shield keeps it
+            delta = cfg.safety.filter(delta, *rules, towards_goal, keep_rotation=straight is not None)
             if straight is None and not stalled:  # neither step is the policy's choice
                 shielded = R.shielded_reward(commanded, delta[:3], w)
 

@@ -19,6 +19,8 @@ from typing import Any, ClassVar, Sequence
 
 import numpy as np
 
+from rayreach.transforms import rotvec_to_matrix
+
 META_ENTRY = "rayreach/meta.json"
 NORM_ENTRY = "rayreach/normalization.npz"
 FORMAT = 1
@@ -143,12 +145,16 @@ class FinalApproach:
     name (docs/training.md, "Acting"). The environment applies it
     (``EnvConfig.final_approach``), where the rays' hit points are known, and sets the
     robot's step and tool (and radius, unless one is given). The straight path is
-    ``radius`` long at most. From farther away it can nudge a policy that has stalled
-    towards the goal (``stall_steps``, off by default)."""
+    ``radius`` long at most. Where only the tool's back blocks it, the tool first turns
+    about its tip towards the path (``turn``). From farther away it can nudge a policy that
+    has stalled towards the goal (``stall_steps``, off by default)."""
 
     NEARER: ClassVar[float] = 0.001
     """How much nearer, m, the path may bring the tool to what it sees than the nearest hit
     is now, once that is within the margin (rounding, not a distance that matters)."""
+    TURNED: ClassVar[float] = 1e-3
+    """Angle, rad, between the tool and its path under which the tool counts as pointing
+    along it (``turn``)."""
 
     radius: float | None = None
     """None: the robot's (``RobotSpec.final_approach_radius``), which the environment fills
@@ -162,6 +168,8 @@ class FinalApproach:
     the goal."""
     ee_step: float = 0.005
     """The robot's largest translation per action, m."""
+    rot_step: float = 0.005
+    """The robot's largest rotation per action, rad."""
     tool_length: float = 0.0
     """Length of the cylindrical tool behind the end effector, m (0: the tip alone)."""
     tool_radius: float = 0.0
@@ -176,9 +184,16 @@ class FinalApproach:
     where no ray looks (docs/training.md, "Acting"), so it is the user's choice."""
     stall_gain: float = 0.01
     """Least progress towards the goal, m, over ``stall_steps`` steps."""
+    turn: bool = True
+    """Where the tip's own path (the tool's radius around it) keeps the margin and only the
+    tool behind it does not, turn the tool about its tip, one rotation step at a time,
+    towards the path, while the turned tool keeps the margin or comes no nearer to anything
+    seen. A tool pointing along its path sweeps only the path. A KR16 tool tilted across an
+    upright plate beside the goal swept its back over the plate's edge, so the path was
+    refused again and again and the run timed out (docs/training.md, "Acting")."""
 
     def __post_init__(self) -> None:
-        for name in ("radius", "ee_step", "stall_gain"):
+        for name in ("radius", "ee_step", "rot_step", "stall_gain"):
             if getattr(self, name) is not None and not getattr(self, name) > 0:
                 raise ValueError(f"{name} must be positive, got {getattr(self, name)}")
         for name in ("margin", "tool_length", "tool_radius", "stall_steps"):
@@ -212,7 +227,8 @@ class FinalApproach:
         unless one hit is that near already and the path brings the tool no nearer to any
         hit than to that one now (a wall it slides along, a compartment it reaches into).
         A hit within ``NEARER`` of the tool (contact) therefore no longer blocks the path;
-        the safety layer's ray shield still does."""
+        the safety layer's ray shield still does. Where the path is refused, the step may be
+        a turn of the tool instead (``turn``): a rotation and no translation."""
         if self.radius is None:
             raise ValueError("FinalApproach.radius is None: give one, or let ReachEnv fill in the robot's")
         goal_offset = np.asarray(goal_offset, dtype=float)
@@ -225,11 +241,38 @@ class FinalApproach:
             if on_path < self.tool_radius + self.margin:
                 now = distances_to_segment(hits, np.zeros(3), back).min()  # the tool where it is
                 if on_path < now - self.NEARER:
-                    return None
+                    return self._turn(goal_offset, hits, tool_direction, now) if self.turn else None
         # along the path tested, not clipped axis by axis: a goal 10 cm below and 1 cm aside
         # took steps of 5 mm down and 5 mm aside, towards a wall beside the goal
         action = np.zeros(6, dtype=np.float32)
         action[:3] = goal_offset / max(float(np.abs(goal_offset).max()), self.ee_step)
+        return action
+
+
+    def _turn(self, goal_offset: np.ndarray, hits: np.ndarray, tool_direction: np.ndarray | None,
+              now: float) -> np.ndarray | None:
+        """One rotation step of the tool about its tip towards ``goal_offset``, as an action;
+        None where the tip's own path is refused too, the tool points along the path
+        already, or the turned tool would come within the margin of a hit and nearer to it
+        than the tool is now to any (``now``)."""
+        if tool_direction is None or not np.linalg.norm(goal_offset) > 0:
+            return None
+        need = self.tool_radius + self.margin
+        if distances_to_segment(hits, np.zeros(3), goal_offset).min() < need:
+            return None
+        tool, path = np.asarray(tool_direction, dtype=float), goal_offset / np.linalg.norm(goal_offset)
+        axis = np.cross(tool, path)
+        size = float(np.linalg.norm(axis))
+        angle = float(np.arctan2(size, tool @ path))
+        if angle < self.TURNED or size < 1e-12:
+            return None
+        rotation = axis / size * min(angle, self.rot_step)
+        turned = rotvec_to_matrix(rotation) @ tool
+        after = distances_to_segment(hits, np.zeros(3), -self.tool_length * turned).min()
+        if after < need and after < now:  # no allowance: turn after turn would creep nearer
+            return None
+        action = np.zeros(6, dtype=np.float32)
+        action[3:] = rotation / self.rot_step
         return action
 
 

@@ -67,14 +67,16 @@ class SafetyLayer:
 
     def filter(self, delta: np.ndarray, ee_pos: np.ndarray, low: np.ndarray, high: np.ndarray,
                ray_distances: np.ndarray, ray_directions: np.ndarray, travel: float | None = None,
-               towards_goal: np.ndarray | None = None) -> np.ndarray:
+               towards_goal: np.ndarray | None = None, keep_rotation: bool = False) -> np.ndarray:
         """``delta`` (dx, dy, dz, rotation vector) as the arm may execute it. ``ray_distances``
         (m) and unit ``ray_directions`` are those of the current observation. ``travel``: how
         far, m, the motion goes in all when that is known (a straight path to the goal); if
         every ray sees farther than that, nothing seen can be reached and the shield lets
         the motion through. Without it, a goal a few centimetres from a wall could not be
         reached: the wall stays within the shield all the way in. ``towards_goal``: the
-        translation ``slide`` takes instead (None: no slide).
+        translation ``slide`` takes instead (None: no slide). ``keep_rotation``: the rotation
+        was tested against what the rays see already (the final approach's turn), so a near
+        ray does not drop it.
 
         Each rule is a half-space through the origin that the translation must lie in, so
         the translation kept is the nearest one to the commanded that lies in all of them
@@ -82,7 +84,7 @@ class SafetyLayer:
         bounds = (ee_pos, low, high)
         near = ray_directions[self._near(ray_distances, travel)]
         out = np.array(delta, dtype=float)
-        if len(near):
+        if len(near) and not keep_rotation:
             out[3:] = 0.0
         out[:3] = nearest_in_cone(out[:3], self._normals(float(np.linalg.norm(out[:3])), *bounds, near), self.TOLERANCE)
         least = self.slide * np.linalg.norm(delta[:3])
