@@ -118,7 +118,8 @@ def test_what_the_tool_is_already_near_blocks_only_a_path_that_comes_nearer():
     assert tool.action(np.array([0.06, 0.004, 0.0]), wall, down) is None  # 4 mm nearer
 
 
-@pytest.mark.parametrize("field,value", [("radius", 0.0), ("margin", -0.01), ("ee_step", float("nan")), ("rot_step", 0.0),
+@pytest.mark.parametrize("field,value", [("radius", 0.0), ("margin", -0.01), ("ee_step", float("nan")),
+                                         ("rot_step", 0.0),
                                          ("tool_length", -0.1), ("tool_radius", -0.02), ("stall_steps", -1),
                                          ("stall_steps", 2.5), ("stall_gain", 0.0)])
 def test_bad_settings_are_refused_by_name(field, value):

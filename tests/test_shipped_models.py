@@ -43,9 +43,9 @@ def test_shipped_policy_loads_with_metadata_and_runs_an_episode(robot, scenario)
                                        "arm_clearance": 0.01, "arm_memory_steps": 100}  # the executor's defaults
     spec = get_robot(robot)  # the env fills in the robot's radius, step and tool
     assert record.config["final_approach"] == {"radius": spec.final_approach_radius, "margin": FinalApproach.margin,
-                                               "ee_step": 0.005, "rot_step": spec.rot_step, "tool_length": spec.tool.length,
-                                               "tool_radius": spec.tool.radius, "stall_steps": 0, "stall_gain": 0.01,
-                                               "turn": True}
+                                               "ee_step": 0.005, "rot_step": spec.rot_step,
+                                               "tool_length": spec.tool.length, "tool_radius": spec.tool.radius,
+                                               "stall_steps": 0, "stall_gain": 0.01, "turn": True}
     assert np.isfinite(record.ee_path).all()
 
 
@@ -170,7 +170,8 @@ def test_a_drawn_action_follows_the_policys_gaussian_clipped_to_the_action_space
     draws = np.array([policy.sample(obs, rng) for _ in range(2000)])
     assert np.all(np.abs(draws) <= 1.0)
     for k in inside:
-        assert abs(draws[:, k].mean() - _clipped_normal_mean(float(mean[k]), float(std[k]))) < 4 * std[k] / math.sqrt(2000)
+        expected = _clipped_normal_mean(float(mean[k]), float(std[k]))
+        assert abs(draws[:, k].mean() - expected) < 4 * std[k] / math.sqrt(len(draws))
 
 
 def test_the_acting_policy_draws_only_on_a_repeated_observation_and_repeats_with_its_seed():

@@ -392,7 +392,8 @@ def _rollout(args: argparse.Namespace, scenario: str) -> int:
     summary = rollout(args.model, scenario, episodes=args.episodes, deterministic=not args.stochastic,
                       goal_tolerance=args.tolerance, n_obstacles=args.obstacles, progress=not args.json,
                       final_approach=None if args.no_final_approach
-                      else FinalApproach(args.final_approach_radius, stall_steps=args.stall_steps, turn=not args.no_turn),
+                      else FinalApproach(args.final_approach_radius, stall_steps=args.stall_steps,
+                                         turn=not args.no_turn),
                       safety=safety, resample=not args.no_resample,
                       seed=EVAL_SEED_OFFSET if args.seed is None else args.seed)
     if args.json:

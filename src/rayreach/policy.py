@@ -248,7 +248,6 @@ class FinalApproach:
         action[:3] = goal_offset / max(float(np.abs(goal_offset).max()), self.ee_step)
         return action
 
-
     def _turn(self, goal_offset: np.ndarray, hits: np.ndarray, tool_direction: np.ndarray | None,
               now: float) -> np.ndarray | None:
         """One rotation step of the tool about its tip towards ``goal_offset``, as an action;
