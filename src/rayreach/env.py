@@ -378,7 +378,8 @@ class ReachEnv(gym.Env):
     """Shares of a step the arm's rule refused that are tried in turn, the longest first:
     a shorter step may keep every blind link outside the rule's clearance."""
 
-    def _move(self, delta: np.ndarray, straight: bool, rules: tuple | None) -> tuple[IKResult, np.ndarray, bool | None]:
+    def _move(self, delta: np.ndarray, straight: bool,
+              rules: tuple | None) -> tuple[IKResult, np.ndarray, bool | None]:
         """IK for the end-effector step ``delta``: the solution, its tool pose, and whether the
         step may be taken (True), not (False), or not by the arm's rule alone (None). Leaves
         the scene's joints where they were or at the solution."""

@@ -254,12 +254,13 @@ class FinalApproach:
         None where the tip's own path is refused too, the tool points along the path
         already, or the turned tool would come within the margin of a hit and nearer to it
         than the tool is now to any (``now``)."""
-        if tool_direction is None or not np.linalg.norm(goal_offset) > 0:
+        length = float(np.linalg.norm(goal_offset))
+        if tool_direction is None or not length > 0:
             return None
         need = self.tool_radius + self.margin
         if distances_to_segment(hits, np.zeros(3), goal_offset).min() < need:
             return None
-        tool, path = np.asarray(tool_direction, dtype=float), goal_offset / np.linalg.norm(goal_offset)
+        tool, path = np.asarray(tool_direction, dtype=float), goal_offset / length
         axis = np.cross(tool, path)
         size = float(np.linalg.norm(axis))
         angle = float(np.arctan2(size, tool @ path))
@@ -333,25 +334,34 @@ class Policy:
 
 class ActingPolicy:
     """The policy as the planner acts with it: its mean action, except on an observation it
-    has just acted on, where it draws one from its own distribution.
+    has just acted on, where it draws one from its own distribution (``deterministic``
+    False: every action drawn, as SB3 draws them).
 
     The observation repeats when the arm held still (the arm's rule refused the step and
-    every shorter share of it) and nothing in view moved. The mean action would then repeat too, and the arm stay held
-    until the step budget ran out: 17 of the KR16's 65 failures in 800 random worlds
-    (docs/training.md, "Acting"). A drawn action goes through the same layers as any
-    other. ``reset(seed)`` starts each run, so a seeded run repeats."""
+    every shorter share of it) and nothing in view moved. The mean action would then repeat
+    too, and the arm stay held until the step budget ran out: 17 of the KR16's 65 failures
+    in 800 random worlds (docs/training.md, "Acting"). A drawn action goes through the same
+    layers as any other. ``reset(seed)`` starts each run, so a seeded run repeats."""
 
-    def __init__(self, policy: Policy, resample: bool = True) -> None:
+    def __init__(self, policy: Policy, deterministic: bool = True, resample: bool = True) -> None:
         self.policy = policy
+        self.deterministic = deterministic
         self.resample = resample
         self._rng = np.random.default_rng(0)
         self._last: np.ndarray | None = None
+
+    @property
+    def draws_where_held(self) -> bool:
+        """Whether a repeated observation draws its action (the mean is acted on otherwise)."""
+        return self.deterministic and self.resample
 
     def reset(self, seed: int) -> None:
         self._rng = np.random.default_rng(seed)
         self._last = None
 
     def act(self, obs: np.ndarray) -> np.ndarray:
+        if not self.deterministic:
+            return self.policy.act(obs, deterministic=False)
         repeated = self._last is not None and np.array_equal(obs, self._last)
         self._last = np.array(obs, copy=True)
         if self.resample and repeated:

@@ -68,7 +68,7 @@ def rollout(
     final obstacle count of training unless ``n_obstacles`` is given. ``final_approach``
     None, ``SafetyLayer()`` and ``resample`` False measure the policy alone."""
     policy = load_policy(model)
-    acting = ActingPolicy(policy, resample=resample)
+    acting = ActingPolicy(policy, deterministic=deterministic, resample=resample)
     env = ReachEnv(robot=policy.robot, scenario=scenario, goal_tolerance=goal_tolerance,
                    safety=safety, final_approach=final_approach)
     if scenario == RANDOM:
@@ -82,8 +82,7 @@ def rollout(
             path = [info["ee_position"]]
             done = False
             while not done:
-                action = acting.act(obs) if deterministic else policy.act(obs, deterministic=False)
-                obs, _, terminated, truncated, info = env.step(action)
+                obs, _, terminated, truncated, info = env.step(acting.act(obs))
                 path.append(info["ee_position"])
                 done = terminated or truncated
             length = float(np.linalg.norm(np.diff(np.asarray(path), axis=0), axis=1).sum())
@@ -106,7 +105,7 @@ def rollout(
         collisions=collisions,
         deterministic=deterministic,
         final_approach=final_approach is not None,
-        resample=resample and deterministic,
+        resample=acting.draws_where_held,
         safety=asdict(safety),
         outcomes=_count(records),
         by_kind={kind: {"episodes": sum(kind in r["kinds"] for r in records),

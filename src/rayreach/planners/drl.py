@@ -37,7 +37,7 @@ class DRLPlanner(ReactivePlanner):
         self.acting_layers = acting_layers
         self.name = "drl" if acting_layers else "drl-alone"
         # drawing anew where the arm is held is part of acting; the bare policy repeats its mean
-        self._acting = ActingPolicy(self.policy, resample=acting_layers)
+        self._acting = ActingPolicy(self.policy, deterministic=deterministic, resample=acting_layers)
 
     @property
     def robot(self) -> str:
@@ -47,12 +47,10 @@ class DRLPlanner(ReactivePlanner):
         self._acting.reset(seed)
 
     def act(self, observation: np.ndarray) -> np.ndarray:
-        if not self.deterministic:
-            return self.policy.act(observation, deterministic=False)
         return self._acting.act(observation)
 
     def config(self) -> dict[str, Any]:
         meta = self.policy.meta
         return {"planner": self.name, "model": str(self.policy.path), "deterministic": self.deterministic,
-                "resample_held": self.deterministic and self._acting.resample,
+                "resample_held": self._acting.draws_where_held,
                 "timesteps": meta.get("timesteps"), "git_commit": meta.get("git_commit")}
