@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import json
 import math
@@ -11,6 +12,7 @@ from statistics import NormalDist
 import numpy as np
 import pytest
 
+from rayreach.detour import Detour
 from rayreach.env import ReachEnv
 from rayreach.execution import Executor
 from rayreach.planners import make_planner
@@ -46,6 +48,7 @@ def test_shipped_policy_loads_with_metadata_and_runs_an_episode(robot, scenario)
                                                "ee_step": 0.005, "rot_step": spec.rot_step,
                                                "tool_length": spec.tool.length, "tool_radius": spec.tool.radius,
                                                "stall_steps": 0, "stall_gain": 0.01, "turn": True}
+    assert record.config["detour"] == dataclasses.asdict(Detour())
     assert np.isfinite(record.ee_path).all()
 
 
@@ -89,7 +92,7 @@ def test_drl_alone_runs_the_policy_without_the_acting_layers_and_restores_them()
     with Executor("exp1") as ex:
         record = ex.run(alone, seed=0)
         again = ex.run(make_planner("drl", "ur5"), seed=0)
-    assert record.planner == "drl-alone" and record.config["final_approach"] is None
+    assert record.planner == "drl-alone" and record.config["final_approach"] is None and record.config["detour"] is None
     assert record.config["safety"] == {"workspace_guard": 0.0, "ray_shield": 0.0, "slide": 0.0, "memory_steps": 0,
                                        "arm_clearance": 0.0, "arm_memory_steps": 100}
     env = ReachEnv(robot="ur5", scenario="exp1")  # no final approach, no safety layer
@@ -120,7 +123,7 @@ def test_rollout_counts_outcomes_per_world_kind():
     policy = load_policy(MODELS_DIR / "kr16.zip")
     acting = ActingPolicy(policy)
     env = ReachEnv(robot="kr16", scenario="random", goal_tolerance=0.01, safety=ACTING_SAFETY,
-                   final_approach=FinalApproach())
+                   final_approach=FinalApproach(), detour=Detour())
     env.set_n_obstacles(policy.meta["state"]["obstacles"]["count"])
     expected: dict[str, dict[str, int]] = {}
     try:
@@ -206,3 +209,14 @@ def test_the_kr16_turns_its_tool_to_reach_a_goal_beside_an_upright_plate():
     assert rollout(MODELS_DIR / "kr16.zip", "random", **world).outcomes["success"] == 1
     assert rollout(MODELS_DIR / "kr16.zip", "random", final_approach=FinalApproach(turn=False),
                    **world).outcomes["timeout"] == 1
+
+
+def test_the_ur5_is_taken_round_a_goal_slot_it_hovers_above():
+    """A random world (seed 3,000,000): the goal between two plates, a box on the way. The
+    policy stalls short of them; the detour takes the tool round the slot's plates, into its
+    open end, where the final approach finishes. Without the detour the run times out."""
+    from rayreach.rollout import rollout
+
+    world = dict(episodes=1, seed=3_000_000, progress=False)
+    assert rollout(MODELS_DIR / "ur5.zip", "random", **world).outcomes["success"] == 1
+    assert rollout(MODELS_DIR / "ur5.zip", "random", detour=None, **world).outcomes["timeout"] == 1

@@ -19,6 +19,7 @@ import pybullet as p
 
 from rayreach.policy import distances_to_segment
 from rayreach.scene import Scene
+from rayreach.voxels import cell_keys
 
 VOXEL = 0.005
 """Seen points closer than this, m, are measured once (a static surface is hit again every step)."""
@@ -108,8 +109,7 @@ class ArmCapsules:
 def _first_per_cell(points: np.ndarray) -> np.ndarray:
     """Indices, in order, of the first of ``points`` in each ``VOXEL``-sized cell (a static
     surface is hit again every step)."""
-    cells = np.floor(points / VOXEL).astype(np.int64) + _CELL_OFFSET
-    _, first = np.unique((cells[:, 0] << 42) | (cells[:, 1] << 21) | cells[:, 2], return_index=True)
+    _, first = np.unique(cell_keys(points, VOXEL), return_index=True)
     return np.sort(first)
 
 
@@ -161,8 +161,3 @@ class ArmGuard:
                 return False
         self._ends = ends
         return True
-
-
-_CELL_OFFSET = 1 << 20
-"""Cells are numbered from here in each axis (about 5 km either side of the origin at
-``VOXEL``), so the three fit in one 63-bit key."""

@@ -27,6 +27,7 @@ def _pick_scenario(args: argparse.Namespace, parser: argparse.ArgumentParser) ->
 
 def build_parser() -> argparse.ArgumentParser:
     from rayreach.demonstrations import EXPERTS, CloneConfig  # numpy only
+    from rayreach.detour import Detour  # numpy only
     from rayreach.policy import FinalApproach  # numpy only
     from rayreach.safety import ACTING_SAFETY  # numpy only
 
@@ -128,6 +129,10 @@ def build_parser() -> argparse.ArgumentParser:
     roll.add_argument("--stall-steps", type=int, default=FinalApproach.stall_steps,
                       help="step towards the goal once this many steps brought it less than 1 cm nearer "
                            "(default 0: off; 100 was measured, docs/training.md)")
+    roll.add_argument("--no-detour", action="store_true",
+                      help="never take a stalled policy round what the rays have seen (rayreach.detour)")
+    roll.add_argument("--detour-steps", type=int, default=Detour.stall_steps,
+                      help="take the detour once this many steps brought the tool less than 1 cm nearer")
     roll.add_argument("--workspace-guard", type=float, default=ACTING_SAFETY.workspace_guard,
                       help="hold the tool this far inside the workspace, m (0: off; rayreach.safety)")
     roll.add_argument("--ray-shield", type=float, default=ACTING_SAFETY.ray_shield,
@@ -384,6 +389,7 @@ def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
 
 
 def _rollout(args: argparse.Namespace, scenario: str) -> int:
+    from rayreach.detour import Detour
     from rayreach.policy import FinalApproach
     from rayreach.rollout import EVAL_SEED_OFFSET, rollout
     from rayreach.safety import SafetyLayer
@@ -395,11 +401,12 @@ def _rollout(args: argparse.Namespace, scenario: str) -> int:
                       else FinalApproach(args.final_approach_radius, stall_steps=args.stall_steps,
                                          turn=not args.no_turn),
                       safety=safety, resample=not args.no_resample,
+                      detour=None if args.no_detour else Detour(stall_steps=args.detour_steps),
                       seed=EVAL_SEED_OFFSET if args.seed is None else args.seed)
     if args.json:
         print(json.dumps({"scenario": scenario, **summary.to_dict()}))
         return 0
-    helpers = [name for name, on in (("final approach", summary.final_approach),
+    helpers = [name for name, on in (("final approach", summary.final_approach), ("detour", summary.detour),
                                      ("safety layer", safety.active or safety.arm_clearance > 0)) if on]
     mode = ("deterministic" if summary.deterministic else "stochastic") + ", " + (" + ".join(helpers) or "policy alone")
     print(f"{scenario}: {summary.episodes} episodes ({mode}), success {summary.success_rate:.1%}, "

@@ -51,6 +51,7 @@ import numpy as np
 
 from rayreach import rewards as R
 from rayreach.arm_guard import ArmCapsules, ArmGuard
+from rayreach.detour import Detour, DetourState
 from rayreach.kinematics import IKParams, IKResult, Kinematics
 from rayreach.policy import FinalApproach
 from rayreach.robots import RobotSpec, get_robot
@@ -95,6 +96,9 @@ class EnvConfig:
     """Not in the paper: replace the action by the straight step at the goal when
     ``rayreach.policy.FinalApproach`` says so; on in the executor and ``rollout``, off in
     training unless ``TrainConfig.acting_layers``."""
+    detour: Detour | None = None
+    """Not in the paper: once the policy stalls, follow a path planned round what the rays
+    have seen (``rayreach.detour.Detour``); off unless given."""
     rewards: R.RewardWeights = R.RewardWeights()
     random_world: RandomWorldConfig = field(default_factory=RandomWorldConfig)
 
@@ -188,6 +192,7 @@ class ReachEnv(gym.Env):
         if fixed is not None:
             self._load_fixed(fixed)
         self._shake = R.ShakeCounter()
+        self._detour: DetourState | None = None
         self._ready = False
 
     # ------------------------------------------------------------------ setup
@@ -212,6 +217,11 @@ class ReachEnv(gym.Env):
             approach, ee_step=self.spec_robot.ee_step, rot_step=self.spec_robot.rot_step,
             tool_length=tool.length, tool_radius=tool.radius,
             radius=self.spec_robot.final_approach_radius if approach.radius is None else approach.radius)
+
+    def set_detour(self, detour: Detour | None) -> None:
+        """Take a stalled policy round what the rays see with ``detour`` (None: never) from the
+        next reset on."""
+        self.config = make_config(self.config, {"detour": detour})
 
     def set_safety(self, layer: SafetyLayer) -> None:
         """Pass each action through ``layer`` (``SafetyLayer()``: off) from the next step on
@@ -267,6 +277,7 @@ class ReachEnv(gym.Env):
                 "is_success": False}
         observation = self._observation(distance, self._cast_rays())
         self._remember_hits()
+        self._start_detour()
         return observation, info
 
     def step(self, action: np.ndarray):
@@ -278,14 +289,17 @@ class ReachEnv(gym.Env):
         if not np.all(np.isfinite(a)):
             raise ValueError(f"action contains NaN or infinity: {a.tolist()}; the scene is unchanged")
         offset = self.goals[self.goal_index] - self.ee_pos
-        straight, stalled = None, False
+        straight, stalled, detour = None, False, None
         if self._final_approach is not None:
             straight = self._final_approach.action(offset, self.ray_hits(), self.ee_rot[:, 2])
-            if straight is not None:
-                a = straight
-            elif self._final_approach.stalled(self._distances):
-                stalled = True
-                a = FinalApproach.towards(offset)
+        if straight is not None:
+            a = straight
+        elif self._detour is not None and (detour := self._detour.action(
+                self.steps, self.ee_pos, self.goals[self.goal_index], self.ee_rot[:, 2], self._distances)) is not None:
+            a = detour
+        elif self._final_approach is not None and self._final_approach.stalled(self._distances):
+            stalled = True
+            a = FinalApproach.towards(offset)
         delta = np.clip(a, -1.0, 1.0) * self._step_scale
         cfg = self.config
         w = cfg.rewards
@@ -295,13 +309,14 @@ class ReachEnv(gym.Env):
             scenario = self.scenario
             commanded = delta[:3]
             travel = None if straight is None else float(np.linalg.norm(offset))  # the straight step, in all
-            towards_goal = None if straight is not None else FinalApproach.towards(offset)[:3] * self._step_scale[:3]
+            towards_goal = (None if straight is not None or detour is not None
+                            else FinalApproach.towards(offset)[:3] * self._step_scale[:3])
             rules = (self.ee_pos, np.asarray(scenario.workspace_low), np.asarray(scenario.workspace_high),  # type: ignore[union-attr]
                      *self._hit_memory.rays(self.ee_pos, self._ray_origins, self._ray_directions,
                                             self._ray_fractions * cfg.ray_range, cfg.safety.ray_shield), travel)
             # the final approach's turn was tested against every hit: the shield keeps it
             delta = cfg.safety.filter(delta, *rules, towards_goal, keep_rotation=straight is not None)
-            if straight is None and not stalled:  # neither step is the policy's choice
+            if straight is None and detour is None and not stalled:  # the policy's own step
                 shielded = R.shielded_reward(commanded, delta[:3], w)
 
         ik, ee, taken = self._move(delta, straight is not None, rules)
@@ -330,6 +345,8 @@ class ReachEnv(gym.Env):
         rays = self._cast_rays()
         if taken:  # a held arm sees what it saw: the memory ages only as the arm moves
             self._remember_hits()
+        if self._detour is not None:
+            self._detour.see(self._ray_origins, self._ray_directions, self._ray_fractions * cfg.ray_range)
         terms = {
             "success": 0.0 if collided else R.success_reward(distance, self.tolerance, w),
             "collision": R.collision_reward(collided, w),
@@ -413,6 +430,20 @@ class ReachEnv(gym.Env):
         self._hit_memory = HitMemory(layer.memory_steps)
         self._arm_guard = (ArmGuard(self._blind_links, layer.arm_clearance, layer.arm_memory_steps)
                            if layer.arm_clearance > 0 else None)
+
+    def _start_detour(self) -> None:
+        """A fresh detour for the episode, which has seen what the rays see at the start."""
+        detour, approach = self.config.detour, self._final_approach
+        self._detour = None
+        if detour is None:
+            return
+        cfg, spec = self.config, self.spec_robot
+        arrive = spec.final_approach_radius if approach is None else approach.radius
+        guard = cfg.safety.workspace_guard + spec.ee_step  # the grid keeps a step inside the guard
+        low = np.asarray(self.scenario.workspace_low) + guard  # type: ignore[union-attr]
+        high = np.asarray(self.scenario.workspace_high) - guard  # type: ignore[union-attr]
+        self._detour = DetourState(detour, spec.tool.length, spec.tool.radius, arrive, cfg.ray_range, low, high)
+        self._detour.see(self._ray_origins, self._ray_directions, self._ray_fractions * cfg.ray_range)
 
     def _remember_hits(self) -> None:
         """Keep what the rays hit now for the arm's rule (``SafetyLayer.arm_clearance``)."""

@@ -25,6 +25,7 @@ from rayreach.kinematics import Kinematics
 from rayreach.planners import GlobalPlanner, PlanResult, ReactivePlanner, Status
 from rayreach.planners.collision import CollisionChecker
 from rayreach.policy import FinalApproach
+from rayreach.detour import Detour
 from rayreach.safety import ACTING_SAFETY, SafetyLayer
 from rayreach.scenarios import Scenario
 from rayreach.scenarios.feasibility import goal_solutions
@@ -47,6 +48,9 @@ class ExecutionConfig:
     final_approach: FinalApproach | None = FinalApproach()
     """The straight step at a goal a reactive planner has nearly reached
     (``rayreach.policy.FinalApproach``); None: the planner's actions to the end."""
+    detour: Detour | None = Detour()
+    """The way round what the rays see for a reactive planner that has stalled
+    (``rayreach.detour.Detour``); None: never."""
 
 
 @dataclass
@@ -120,7 +124,7 @@ class Executor:
                  config: ExecutionConfig = ExecutionConfig()) -> None:
         self.config = config
         self.env = ReachEnv(robot=robot, scenario=scenario, goal_tolerance=config.goal_tolerance,
-                            safety=config.safety, final_approach=config.final_approach)
+                            safety=config.safety, final_approach=config.final_approach, detour=config.detour)
         self.kin = self.env.kin
         self.scene = self.env.scene
         self.checker = CollisionChecker(self.scene)
@@ -180,22 +184,26 @@ class Executor:
     def _acting(self) -> dict[str, Any]:
         """What acted between a reactive planner and the arm, for its run records."""
         approach = self.env.final_approach
+        detour = self.env.config.detour
         return {"safety": asdict(self.env.config.safety),
-                "final_approach": asdict(approach) if approach is not None else None}
+                "final_approach": asdict(approach) if approach is not None else None,
+                "detour": asdict(detour) if detour is not None else None}
 
     @contextmanager
     def _layers(self, on: bool) -> Iterator[None]:
-        """The final approach and safety layer of ``config`` on, or off for this run."""
+        """The final approach, detour and safety layer of ``config`` on, or off for this run."""
         if on:
             yield
             return
         env = self.env
         env.set_final_approach(None)
+        env.set_detour(None)
         env.set_safety(SafetyLayer())
         try:
             yield
         finally:
             env.set_final_approach(self.config.final_approach)
+            env.set_detour(self.config.detour)
             env.set_safety(self.config.safety)
 
     def _record(self, planner, seed: int, **values: Any) -> RunRecord:

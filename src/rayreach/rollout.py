@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from rayreach.detour import Detour
 from rayreach.env import OUTCOMES, ReachEnv, episode_outcome
 from rayreach.policy import ActingPolicy, FinalApproach, load_policy
 from rayreach.safety import ACTING_SAFETY, SafetyLayer
@@ -30,6 +31,7 @@ class RolloutSummary:
     collisions: int
     deterministic: bool
     final_approach: bool
+    detour: bool
     resample: bool
     """Whether a held arm's repeated observation drew its action (``ActingPolicy``)."""
     safety: dict[str, float]
@@ -63,14 +65,15 @@ def rollout(
     final_approach: FinalApproach | None = FinalApproach(),
     safety: SafetyLayer = ACTING_SAFETY,
     resample: bool = True,
+    detour: Detour | None = Detour(),
 ) -> RolloutSummary:
     """``episodes`` episodes of the policy at ``goal_tolerance``. Random worlds use the
     final obstacle count of training unless ``n_obstacles`` is given. ``final_approach``
-    None, ``SafetyLayer()`` and ``resample`` False measure the policy alone."""
+    and ``detour`` None, ``SafetyLayer()`` and ``resample`` False measure the policy alone."""
     policy = load_policy(model)
     acting = ActingPolicy(policy, deterministic=deterministic, resample=resample)
     env = ReachEnv(robot=policy.robot, scenario=scenario, goal_tolerance=goal_tolerance,
-                   safety=safety, final_approach=final_approach)
+                   safety=safety, final_approach=final_approach, detour=detour)
     if scenario == RANDOM:
         trained = policy.meta.get("state", {}).get("obstacles", {}).get("count", 0)
         env.set_n_obstacles(trained if n_obstacles is None else n_obstacles)
@@ -105,6 +108,7 @@ def rollout(
         collisions=collisions,
         deterministic=deterministic,
         final_approach=final_approach is not None,
+        detour=detour is not None,
         resample=acting.draws_where_held,
         safety=asdict(safety),
         outcomes=_count(records),

@@ -82,7 +82,8 @@ class TrainConfig:
     acting_layers: bool = False
     """Play training episodes with the final approach and the safety layer the planner acts
     with (not in the paper; docs/training.md, "Training as it acts"): collisions and exits
-    the layer would stop become waits, which the policy must learn to go around."""
+    the layer would stop become waits, which the policy must learn to go around. Not with
+    the detour: its steps, up to hundreds in a row, are not the policy's to learn from."""
     checkpoint_every: int = 100_000
     goal: GoalSizeParams = field(default_factory=GoalSizeParams)
     obstacles: ObstacleParams = field(default_factory=ObstacleParams)
