@@ -125,6 +125,7 @@ class DetourState:
 
     @property
     def active(self) -> bool:
+        """Whether a detour is being followed."""
         return self._path is not None
 
     def action(self, step: int, ee_pos: np.ndarray, goal: np.ndarray, tool_direction: np.ndarray,
