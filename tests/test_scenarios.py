@@ -465,3 +465,39 @@ def test_random_worlds_are_seeded(ur5_random_env):
     env.reset(seed=5)
     assert env.scenario == first[0]
     np.testing.assert_array_equal(env.q, first[1])
+
+
+def test_scene_clearance_is_the_gap_to_the_nearest_obstacle():
+    """A sphere 3 cm below the tip of exp1's downward tool (whose flat end is the tip)."""
+    from exp1_scenes import exp1_around_the_tool
+    from rayreach.scenarios.schema import ObstacleSpec
+
+    gap, radius = 0.03, 0.02
+    env = exp1_around_the_tool([lambda ee: ObstacleSpec("sphere", (ee[0], ee[1], ee[2] - gap - radius),
+                                                         radius=radius)])
+    try:
+        env.reset(seed=0)
+        assert env.scene.clearance(0.1) == pytest.approx(gap, abs=2e-3)
+        assert env.scene.clearance(0.01) == 0.01  # nothing that near
+    finally:
+        env.close()
+
+
+def _nearest_obstacle(scene) -> float:
+    import pybullet as p
+
+    return min(c[8] for body in scene._obstacle_ids
+               for c in p.getClosestPoints(scene.robot, body, 1.0, physicsClientId=scene.client))
+
+
+def test_random_worlds_keep_the_start_clear_of_obstacles_when_asked(ur5_random_env):
+    env = ur5_random_env
+    for clearance, all_clear in ((0.0, False), (0.05, True)):
+        worlds = RandomWorlds(env.kin, env.scene, RandomWorldConfig(start_clearance=clearance))
+        nearest = []
+        for seed in range(15):
+            worlds.sample(np.random.default_rng(seed), 3)  # leaves the scene at the start
+            nearest.append(_nearest_obstacle(env.scene))
+        assert (min(nearest) >= 0.05) == all_clear, (clearance, min(nearest))
+    with pytest.raises(ValueError, match="start_clearance"):
+        RandomWorldConfig(start_clearance=-0.01)

@@ -149,6 +149,9 @@ def build_parser() -> argparse.ArgumentParser:
     roll.add_argument("--no-resample", action="store_true",
                       help="act on the policy's mean action even where the arm is held and the observation repeats "
                            "(rayreach.policy.ActingPolicy)")
+    roll.add_argument("--start-clearance", type=float, default=0.0,
+                      help="random worlds: keep the robot's start this far from every obstacle, m (default 0: free of "
+                           "collision only; the authors' generator kept 0.05)")
     roll.add_argument("--seed", type=int, default=None, help="seed of the first random world (default 1000000)")
     roll.add_argument("--json", action="store_true", help="print one JSON line")
 
@@ -402,6 +405,7 @@ def _rollout(args: argparse.Namespace, scenario: str) -> int:
                                          turn=not args.no_turn),
                       safety=safety, resample=not args.no_resample,
                       detour=None if args.no_detour else Detour(stall_steps=args.detour_steps),
+                      start_clearance=args.start_clearance,
                       seed=EVAL_SEED_OFFSET if args.seed is None else args.seed)
     if args.json:
         print(json.dumps({"scenario": scenario, **summary.to_dict()}))

@@ -13,7 +13,7 @@ from rayreach.env import OUTCOMES, ReachEnv, episode_outcome
 from rayreach.policy import ActingPolicy, FinalApproach, load_policy
 from rayreach.safety import ACTING_SAFETY, SafetyLayer
 from rayreach.scenarios import RANDOM
-from rayreach.scenarios.random_world import world_kinds
+from rayreach.scenarios.random_world import RandomWorldConfig, world_kinds
 
 EVAL_SEED_OFFSET = 1_000_000
 """Random-world rollouts draw seeds from here on; training uses seeds below it."""
@@ -66,14 +66,18 @@ def rollout(
     safety: SafetyLayer = ACTING_SAFETY,
     resample: bool = True,
     detour: Detour | None = Detour(),
+    start_clearance: float = 0.0,
 ) -> RolloutSummary:
     """``episodes`` episodes of the policy at ``goal_tolerance``. Random worlds use the
-    final obstacle count of training unless ``n_obstacles`` is given. ``final_approach``
-    and ``detour`` None, ``SafetyLayer()`` and ``resample`` False measure the policy alone."""
+    final obstacle count of training unless ``n_obstacles`` is given, and keep the robot's
+    start ``start_clearance`` from every obstacle (``RandomWorldConfig.start_clearance``).
+    ``final_approach`` and ``detour`` None, ``SafetyLayer()`` and ``resample`` False measure
+    the policy alone."""
     policy = load_policy(model)
     acting = ActingPolicy(policy, deterministic=deterministic, resample=resample)
     env = ReachEnv(robot=policy.robot, scenario=scenario, goal_tolerance=goal_tolerance,
-                   safety=safety, final_approach=final_approach, detour=detour)
+                   safety=safety, final_approach=final_approach, detour=detour,
+                   random_world=RandomWorldConfig(start_clearance=start_clearance))
     if scenario == RANDOM:
         trained = policy.meta.get("state", {}).get("obstacles", {}).get("count", 0)
         env.set_n_obstacles(trained if n_obstacles is None else n_obstacles)

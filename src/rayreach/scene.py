@@ -238,6 +238,14 @@ class Scene:
         """Whether the robot (arm or tool) penetrates any obstacle in its current state."""
         return bool(self._penetrating_bodies())
 
+    def clearance(self, within: float) -> float:
+        """Least distance, m, between the robot (arm or tool) and any obstacle in its current
+        state, or ``within`` when none is nearer than that."""
+        cid = self.client
+        distances = [c[8] for body in self._obstacle_ids
+                     for c in p.getClosestPoints(self.robot, body, within, physicsClientId=cid)]
+        return min(distances, default=within)
+
     def colliding_obstacles(self) -> list[int]:
         """Indices (into ``self.obstacles``) of the obstacles the robot penetrates now."""
         index = {body: i for i, body in enumerate(self._obstacle_ids)}
