@@ -43,8 +43,9 @@ class Detour:
     """How far past the tool's back the path also keeps clear, m: the wrist and forearm follow
     the tool and carry no rays, so a tool pointing down cannot pass just under a box."""
     held_steps: int = 5
-    """End the detour after this many steps in which the arm held still (the arm's rule
-    refuses what the path asks, which the path does not model); the policy acts again."""
+    """End the detour after this many steps in which the arm held still (the safety layer's
+    shield or the arm's rule refused what the path asks, which the path does not model);
+    the policy acts again."""
     reach: float = 0.3
     """The grid spans the box round the end effector and the goal grown by this much, m,
     inside the workspace."""
