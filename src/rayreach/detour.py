@@ -17,6 +17,7 @@ from typing import ClassVar, Sequence
 
 import numpy as np
 
+from rayreach.policy import stalled
 from rayreach.voxels import cell_keys
 
 VOXEL = 0.01
@@ -139,10 +140,9 @@ class DetourState:
             if self._path is not None:
                 self._end(step)
             return None
-        if self._path is None:
-            n = d.stall_steps
-            if step - self._since < n or len(distances) <= n or distances[-n - 1] - distances[-1] >= d.stall_gain:
-                return None
+        if self._path is None and (step - self._since < d.stall_steps
+                                   or not stalled(distances, d.stall_steps, d.stall_gain)):
+            return None
         if self._path is not None and self._last is not None:
             self._held = self._held + 1 if np.linalg.norm(ee_pos - self._last) < 1e-4 else 0
             if self._held >= d.held_steps:

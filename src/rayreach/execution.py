@@ -20,12 +20,12 @@ from typing import Any, Iterator
 
 import numpy as np
 
+from rayreach.detour import Detour
 from rayreach.env import ReachEnv, episode_outcome
 from rayreach.kinematics import Kinematics
 from rayreach.planners import GlobalPlanner, PlanResult, ReactivePlanner, Status
 from rayreach.planners.collision import CollisionChecker
 from rayreach.policy import FinalApproach
-from rayreach.detour import Detour
 from rayreach.safety import ACTING_SAFETY, SafetyLayer
 from rayreach.scenarios import Scenario
 from rayreach.scenarios.feasibility import goal_solutions

@@ -206,8 +206,7 @@ class FinalApproach:
         """Whether ``distances`` (to the current goal after each step, oldest first) show a
         stall: ``stall_steps`` steps that brought the end effector less than ``stall_gain``
         nearer."""
-        n = self.stall_steps
-        return n > 0 and len(distances) > n and distances[-n - 1] - distances[-1] < self.stall_gain
+        return self.stall_steps > 0 and stalled(distances, self.stall_steps, self.stall_gain)
 
     @staticmethod
     def towards(goal_offset: np.ndarray) -> np.ndarray:
@@ -274,6 +273,13 @@ class FinalApproach:
         action = np.zeros(6, dtype=np.float32)
         action[3:] = rotation / self.rot_step
         return action
+
+
+def stalled(distances: Sequence[float], steps: int, gain: float) -> bool:
+    """Whether ``distances`` (to the current goal after each step, oldest first) hold ``steps``
+    steps (>= 1) and the last ``steps`` of them brought the end effector less than ``gain``
+    nearer."""
+    return len(distances) > steps and distances[-steps - 1] - distances[-1] < gain
 
 
 def distances_to_segment(points: np.ndarray, a: np.ndarray, d: np.ndarray) -> np.ndarray:
