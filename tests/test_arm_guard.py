@@ -32,9 +32,9 @@ def test_capsules_are_never_nearer_than_pybullet_says_the_link_is(robot):
     spec = get_robot(robot)
     scene = Scene(spec)
     try:
-        meshed = tuple(name for name, index in scene.link_indices.items() if name not in (TOOL_LINK, TCP_LINK)
+        meshed = tuple(name for name, index in scene.link_indices.items() if name != TCP_LINK
                        and p.getMeshData(scene.robot, index, physicsClientId=scene.client)[0] >= 4)
-        assert set(spec.blind_links) < set(meshed) and len(meshed) >= 6
+        assert set(spec.blind_links) | {TOOL_LINK} < set(meshed) and len(meshed) >= 7
         capsules = ArmCapsules(scene, meshed)
         probe = p.createCollisionShape(p.GEOM_SPHERE, radius=1e-4, physicsClientId=scene.client)
         rng = np.random.default_rng(0)
@@ -62,7 +62,7 @@ def test_clearance_misses_no_point_pybullet_finds_near_a_blind_link(robot):
     spec = get_robot(robot)
     scene = Scene(spec)
     try:
-        links = ArmCapsules(scene, spec.blind_links)
+        links = ArmCapsules(scene, (*spec.blind_links, TOOL_LINK))
         probe = p.createCollisionShape(p.GEOM_SPHERE, radius=PROBE, physicsClientId=scene.client)
         rng = np.random.default_rng(1)
         scene.set_joints(np.asarray(spec.home))
@@ -100,14 +100,16 @@ def test_points_in_one_voxel_are_measured_once_the_first_kept():
     assert _first_per_cell(points).tolist() == [0, 1, 3]
 
 
-def _wrist_step(point_side: float, steps: int = 1, memory: int = 5, gap: float = 0.015) -> float:
+def _wrist_step(point_side: float, steps: int = 1, memory: int = 5, gap: float = 0.015, link_name: str = "link_5",
+                guard_tool: bool = False) -> float:
     """``steps`` +x steps of the KR16 in exp4 with one seen point placed ``gap`` off the
-    wrist's surface on the side ``point_side`` (+1: where the steps go), the rule's clearance
-    2 cm. Returns how far the tool moved."""
-    env = ReachEnv(robot="kr16", scenario="exp4", safety=SafetyLayer(arm_clearance=0.02, arm_memory_steps=memory))
+    surface of ``link_name`` (the wrist) on the side ``point_side`` (+1: where the steps go),
+    the rule's clearance 2 cm. Returns how far the tool moved."""
+    layer = SafetyLayer(arm_clearance=0.02, arm_memory_steps=memory, guard_tool=guard_tool)
+    env = ReachEnv(robot="kr16", scenario="exp4", safety=layer)
     try:
         env.reset(seed=0)
-        scene, link = env.scene, env.scene.link_indices["link_5"]
+        scene, link = env.scene, env.scene.link_indices[link_name]
         wrist = env._arm_guard.links.links.index(link)
         a, b = env._arm_guard.links.world()
         outward = point_side * np.array([1.0, 0.0, 0.0])
@@ -150,6 +152,36 @@ def test_unknown_or_meshless_links_are_refused_by_name():
         scene.close()
 
 
+def test_the_tool_is_held_off_a_seen_point_only_where_the_rule_watches_it():
+    """The KR16's tool is blind between its rays: with ``guard_tool`` a step that sweeps its
+    side towards a point seen 1.5 cm off it is refused; without, the step is taken."""
+    assert _wrist_step(+1.0, link_name=TOOL_LINK, guard_tool=True) == 0.0
+    assert _wrist_step(+1.0, link_name=TOOL_LINK) == pytest.approx(0.005, abs=5e-4)
+    assert _wrist_step(-1.0, link_name=TOOL_LINK, guard_tool=True) == pytest.approx(0.005, abs=5e-4)
+
+
+def test_the_final_approachs_step_leaves_the_tool_out_of_the_rule():
+    """``tool=False`` (the env's final-approach steps, whose straight path was tested against
+    every hit already) measures the arm alone: a point beside the tool holds the step only
+    when the tool is watched."""
+    env = ReachEnv(robot="kr16", scenario="exp4", safety=SafetyLayer(arm_clearance=0.02, guard_tool=True))
+    try:
+        env.reset(seed=0)
+        guard, tool = env._arm_guard, env.scene.link_indices[TOOL_LINK]
+        a, b = guard.links.world()
+        k = guard.links.links.index(tool)
+        axis = (b[k] - a[k]) / np.linalg.norm(b[k] - a[k])
+        side = np.cross(axis, [0.0, 0.0, 1.0])
+        side /= np.linalg.norm(side)
+        guard.seen.add(((a[k] + b[k]) / 2 + (guard.links.radii[k] + 0.015) * side)[None])
+        ik = env.kin.ik(env.ee_pos + 0.005 * side, env.ee_rot, env.q, env.config.ik, start_frames=env.frames)
+        assert ik.converged
+        assert not guard.allows(env.q, ik.q)
+        assert guard.allows(env.q, ik.q, tool=False)
+    finally:
+        env.close()
+
+
 def test_a_held_arm_does_not_forget_what_holds_it():
     """With a memory of one step, the point would be gone after the first held step if held
     steps counted; they do not, so the arm stays held."""
@@ -161,3 +193,5 @@ def test_arm_rule_settings_are_checked():
         SafetyLayer(arm_clearance=-0.01)
     with pytest.raises(ValueError, match="arm_memory_steps counts steps"):
         SafetyLayer(arm_memory_steps=2.5)
+    with pytest.raises(ValueError, match="guard_tool is True or False, got 'yes'"):
+        SafetyLayer(guard_tool="yes")

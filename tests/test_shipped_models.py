@@ -42,7 +42,8 @@ def test_shipped_policy_loads_with_metadata_and_runs_an_episode(robot, scenario)
     assert record.outcome in {"success", "collision", "timeout", "out of bounds"}
     assert 0 < record.steps <= 1024 and record.config["timesteps"] == meta["timesteps"]
     assert record.config["safety"] == {"workspace_guard": 0.01, "ray_shield": 0.05, "slide": 0.1, "memory_steps": 10,
-                                       "arm_clearance": 0.01, "arm_memory_steps": 100}  # the executor's defaults
+                                       "arm_clearance": 0.01, "arm_memory_steps": 100,
+                                       "guard_tool": True}  # the executor's defaults
     spec = get_robot(robot)  # the env fills in the robot's radius, step and tool
     assert record.config["final_approach"] == {"radius": spec.final_approach_radius, "margin": FinalApproach.margin,
                                                "ee_step": 0.005, "rot_step": spec.rot_step,
@@ -94,7 +95,7 @@ def test_drl_alone_runs_the_policy_without_the_acting_layers_and_restores_them()
         again = ex.run(make_planner("drl", "ur5"), seed=0)
     assert record.planner == "drl-alone" and record.config["final_approach"] is None and record.config["detour"] is None
     assert record.config["safety"] == {"workspace_guard": 0.0, "ray_shield": 0.0, "slide": 0.0, "memory_steps": 0,
-                                       "arm_clearance": 0.0, "arm_memory_steps": 100}
+                                       "arm_clearance": 0.0, "arm_memory_steps": 100, "guard_tool": False}
     env = ReachEnv(robot="ur5", scenario="exp1")  # no final approach, no safety layer
     try:
         obs, info = env.reset(seed=0)
@@ -209,6 +210,19 @@ def test_the_kr16_turns_its_tool_to_reach_a_goal_beside_an_upright_plate():
     assert rollout(MODELS_DIR / "kr16.zip", "random", **world).outcomes["success"] == 1
     assert rollout(MODELS_DIR / "kr16.zip", "random", final_approach=FinalApproach(turn=False),
                    **world).outcomes["timeout"] == 1
+
+
+def test_the_ur5s_tool_is_held_off_a_box_it_saw():
+    """A random world (seed 1,000,045) that starts with a box beside the tool: its rays see
+    the box, the step after sweeps the tool's blind side into it, unless the arm's rule
+    watches the tool too (``SafetyLayer.guard_tool``)."""
+    from rayreach.rollout import rollout
+    from rayreach.safety import ACTING_SAFETY
+
+    world = dict(episodes=1, seed=1_000_045, progress=False)
+    assert rollout(MODELS_DIR / "ur5.zip", "random", **world).outcomes["success"] == 1
+    unguarded = dataclasses.replace(ACTING_SAFETY, guard_tool=False)
+    assert rollout(MODELS_DIR / "ur5.zip", "random", safety=unguarded, **world).outcomes["collision"] == 1
 
 
 def test_the_ur5_is_taken_round_a_goal_slot_it_hovers_above():

@@ -6,8 +6,10 @@ is most of what that robot still strikes (docs/training.md, "Acting"). ``SeenPoi
 remembers where the rays hit over the last steps; ``ArmCapsules`` wraps the robot's
 ``blind_links`` in capsules fitted to their collision meshes and measures the seen points
 near them against the meshes; ``ArmGuard`` refuses a step that brings a link nearer than
-``clearance`` to a point that was seen. Only ray data enters the rule, as for the rest of
-the safety layer.
+``clearance`` to a point that was seen. The tool carries rays but is blind between them: a
+plate seen edge-on slips between the wraparound's rings and columns, and a tool that saw it
+a few steps earlier swept its side into it; the rule can watch the tool as well. Only ray
+data enters the rule, as for the rest of the safety layer.
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ import numpy as np
 import pybullet as p
 
 from rayreach.policy import distances_to_segment
+from rayreach.robots.urdf import TOOL_LINK
 from rayreach.scene import Scene
 from rayreach.voxels import cell_keys
 
@@ -52,6 +55,7 @@ class ArmCapsules:
         unknown = [name for name in links if name not in scene.link_indices]
         if unknown:
             raise ValueError(f"robot '{scene.spec.name}' has no links {unknown}; it has {sorted(scene.link_indices)}")
+        self.names = tuple(links)
         self.links: list[int] = []
         ends, radii = [], []
         for name in links:
@@ -77,21 +81,28 @@ class ArmCapsules:
             a[k], b[k] = self._ends[k] @ rot.T + np.asarray(state[0])
         return a, b
 
+    def mask(self, leave_out: tuple[str, ...] = ()) -> np.ndarray:
+        """Which links ``clearance`` measures (its ``use``): all but those named."""
+        return np.array([name not in leave_out for name in self.names], dtype=bool)
+
     def clearance(self, points: np.ndarray, within: float,
-                  ends: tuple[np.ndarray, np.ndarray] | None = None) -> float:
-        """Least distance, m, from ``points`` (n, 3) to the links' collision meshes in the
-        scene's current joint state, as PyBullet measures it, or ``within`` if none is
-        nearer. The capsules (``ends``: ``world()``'s, if already known) bound each point's
-        distance from below, so points are measured nearest first, one per ``VOXEL``-sized
-        cell, until the bound passes the nearest measured."""
-        if not len(points) or not len(self.links):
+                  ends: tuple[np.ndarray, np.ndarray] | None = None, use: np.ndarray | None = None) -> float:
+        """Least distance, m, from ``points`` (n, 3) to the collision meshes of the links
+        (those ``use`` marks, ``mask()``; None: all) in the scene's current joint state, as
+        PyBullet measures it, or ``within`` if none is nearer. The capsules (``ends``:
+        ``world()``'s, if already known) bound each point's distance from below, so points
+        are measured nearest first, one per ``VOXEL``-sized cell, until the bound passes the
+        nearest measured."""
+        use = np.ones(len(self.links), dtype=bool) if use is None else use
+        if not len(points) or not use.any():
             return within
         a, b = self.world() if ends is None else ends
+        a, b, links, radii = a[use], b[use], np.asarray(self.links)[use], self.radii[use]
         # a sphere around each capsule first: a cheap product, where most points drop out
         middle, half = (a + b) / 2, np.linalg.norm(b - a, axis=1) / 2
         square = (points * points).sum(axis=1)[:, None] - 2 * points @ middle.T + (middle * middle).sum(axis=1)[None]
-        points = points[(square < (half + self.radii + within)[None] ** 2).any(axis=1)]
-        bound = np.stack([distances_to_segment(points, a[k], b[k] - a[k]) for k in range(len(a))], axis=1) - self.radii[None]
+        points = points[(square < (half + radii + within)[None] ** 2).any(axis=1)]
+        bound = np.stack([distances_to_segment(points, a[k], b[k] - a[k]) for k in range(len(a))], axis=1) - radii[None]
         best = within
         for k in np.flatnonzero((bound < within).any(axis=0)):
             order = np.argsort(bound[:, k])
@@ -99,7 +110,7 @@ class ArmCapsules:
             for i in order[_first_per_cell(points[order])]:
                 if bound[i, k] - PAD >= best:
                     break
-                close = p.getClosestPoints(self.scene.robot, -1, best, linkIndexA=self.links[k],
+                close = p.getClosestPoints(self.scene.robot, -1, best, linkIndexA=int(links[k]),
                                            collisionShapeB=self._probe, collisionShapePositionB=points[i].tolist(),
                                            physicsClientId=self.scene.client)
                 best = min([best, *(c[8] for c in close)])
@@ -137,27 +148,32 @@ class SeenPoints:
 
 class ArmGuard:
     """The arm's rule for one episode (``SafetyLayer.arm_clearance``): remembers what the rays
-    hit and tells whether a joint step keeps the blind links clear of it. Made where the
-    scene's joints are at the start."""
+    hit and tells whether a joint step keeps the blind links clear of it, and the tool too
+    where ``links`` holds it (``TOOL_LINK``) and ``tool`` is set
+    (``SafetyLayer.guard_tool``). Made where the scene's joints are at the start."""
 
-    def __init__(self, links: ArmCapsules, clearance: float, steps: int) -> None:
+    def __init__(self, links: ArmCapsules, clearance: float, steps: int, tool: bool = False) -> None:
         self.scene = links.scene
         self.links = links
         self.clearance = clearance
         self.seen = SeenPoints(steps)
+        self._with_tool = links.mask(() if tool else (TOOL_LINK,))
+        self._arm = links.mask((TOOL_LINK,))
         self._ends = self.links.world()  # where the last allowed step left the capsules
 
-    def allows(self, q_now: np.ndarray, q: np.ndarray) -> bool:
+    def allows(self, q_now: np.ndarray, q: np.ndarray, tool: bool = True) -> bool:
         """Whether moving the joints from ``q_now`` (where the last allowed step left them)
-        to ``q`` keeps every blind link ``clearance`` from what the rays have seen, or brings
-        none nearer than it is now. Leaves the scene's joints at ``q`` or ``q_now``."""
+        to ``q`` keeps every watched link ``clearance`` from what the rays have seen, or
+        brings none nearer than it is now; ``tool=False`` leaves the tool out this step.
+        Leaves the scene's joints at ``q`` or ``q_now``."""
         self.scene.set_joints(q)
         ends = self.links.world()
         points = self.seen.points()
-        after = self.links.clearance(points, self.clearance, ends)
+        use = self._with_tool if tool else self._arm
+        after = self.links.clearance(points, self.clearance, ends, use)
         if after < self.clearance:
             self.scene.set_joints(q_now)
-            if after < self.links.clearance(points, self.clearance, self._ends):
+            if after < self.links.clearance(points, self.clearance, self._ends, use):
                 return False
         self._ends = ends
         return True

@@ -146,6 +146,8 @@ def build_parser() -> argparse.ArgumentParser:
     roll.add_argument("--arm-clearance", type=float, default=ACTING_SAFETY.arm_clearance,
                       help="refuse steps that bring an arm link nearer than this to what the rays saw in the last "
                            f"{ACTING_SAFETY.arm_memory_steps} steps, m (0: off; rayreach.arm_guard)")
+    roll.add_argument("--no-guard-tool", action="store_true",
+                      help="the arm's rule watches the arm's blind links only, not the tool (rayreach.arm_guard)")
     roll.add_argument("--no-resample", action="store_true",
                       help="act on the policy's mean action even where the arm is held and the observation repeats "
                            "(rayreach.policy.ActingPolicy)")
@@ -397,7 +399,8 @@ def _rollout(args: argparse.Namespace, scenario: str) -> int:
     from rayreach.rollout import EVAL_SEED_OFFSET, rollout
     from rayreach.safety import SafetyLayer
 
-    safety = SafetyLayer(args.workspace_guard, args.ray_shield, args.slide, args.memory_steps, args.arm_clearance)
+    safety = SafetyLayer(args.workspace_guard, args.ray_shield, args.slide, args.memory_steps, args.arm_clearance,
+                         guard_tool=not args.no_guard_tool)
     summary = rollout(args.model, scenario, episodes=args.episodes, deterministic=not args.stochastic,
                       goal_tolerance=args.tolerance, n_obstacles=args.obstacles, progress=not args.json,
                       final_approach=None if args.no_final_approach

@@ -55,6 +55,7 @@ from rayreach.detour import Detour, DetourState
 from rayreach.kinematics import IKParams, IKResult, Kinematics
 from rayreach.policy import FinalApproach
 from rayreach.robots import RobotSpec, get_robot
+from rayreach.robots.urdf import TOOL_LINK
 from rayreach.safety import HitMemory, SafetyLayer
 from rayreach.scenarios import RANDOM, Scenario, ScenarioError, get_scenario
 from rayreach.scenarios.feasibility import solve_start, validate
@@ -176,7 +177,7 @@ class ReachEnv(gym.Env):
         self.kin = Kinematics(self.spec_robot, base_pos, base_rpy)
         self.scene = Scene(self.spec_robot, base_pos, base_rpy, gui=render_mode == "human")
         self.rays = RayModel(self.spec_robot, self.config.ray_range)
-        self._blind_links = ArmCapsules(self.scene, self.spec_robot.blind_links)
+        self._blind_links = ArmCapsules(self.scene, (*self.spec_robot.blind_links, TOOL_LINK))
         self.worlds = RandomWorlds(self.kin, self.scene, self.config.random_world) if self.random else None
         self.n_obstacles = self.config.random_world.n_obstacles
 
@@ -412,7 +413,7 @@ class ReachEnv(gym.Env):
         # an unconverged IK step may move the tool where the layer did not let it: then it holds still
         if not (rules is None or ik.converged or cfg.safety.allows(ee[:3, 3] - self.ee_pos, *rules)):
             return ik, ee, False
-        if self._arm_guard is not None and not self._arm_guard.allows(self.q, ik.q):  # moves the scene's joints
+        if self._arm_guard is not None and not self._arm_guard.allows(self.q, ik.q, tool=not straight):  # moves the joints
             return ik, ee, None
         return ik, ee, True
 
@@ -428,7 +429,7 @@ class ReachEnv(gym.Env):
         (which starts from the scene's joints as they are)."""
         layer = self.config.safety
         self._hit_memory = HitMemory(layer.memory_steps)
-        self._arm_guard = (ArmGuard(self._blind_links, layer.arm_clearance, layer.arm_memory_steps)
+        self._arm_guard = (ArmGuard(self._blind_links, layer.arm_clearance, layer.arm_memory_steps, layer.guard_tool)
                            if layer.arm_clearance > 0 else None)
 
     def _start_detour(self) -> None:

@@ -49,6 +49,12 @@ class SafetyLayer:
     arm_memory_steps: int = 100
     """How many steps of ray hits ``arm_clearance`` keeps; steps in which the arm held still
     do not count (it would forget what it is held off, and move into it)."""
+    guard_tool: bool = False
+    """The arm's rule watches the tool itself too, except on the final approach's steps
+    (``rayreach.policy.FinalApproach``), whose straight path is tested against every hit
+    with the tool's shape already and may pass a wall nearer than ``arm_clearance``. A thin
+    plate seen edge-on slips between the rays; a tool that saw it a few steps earlier swept
+    its side into it (docs/training.md, "Acting")."""
 
     def __post_init__(self) -> None:
         for name in ("workspace_guard", "ray_shield", "slide", "memory_steps", "arm_clearance", "arm_memory_steps"):
@@ -57,6 +63,8 @@ class SafetyLayer:
         for name in ("memory_steps", "arm_memory_steps"):
             if getattr(self, name) != int(getattr(self, name)):
                 raise ValueError(f"{name} counts steps, a whole number, got {getattr(self, name)}")
+        if not isinstance(self.guard_tool, (bool, np.bool_)):
+            raise ValueError(f"guard_tool is True or False, got {self.guard_tool!r}")
         if self.slide > 1:
             raise ValueError(f"slide is a share of the commanded step, 0 to 1, got {self.slide}")
 
@@ -235,9 +243,11 @@ def nearest_in_cone(move: np.ndarray, normals: np.ndarray, tolerance: float = 0.
     return candidates[np.argmin(np.linalg.norm(candidates - move, axis=1))]
 
 
-ACTING_SAFETY = SafetyLayer(workspace_guard=0.01, ray_shield=0.05, slide=0.1, memory_steps=10, arm_clearance=0.01)
+ACTING_SAFETY = SafetyLayer(workspace_guard=0.01, ray_shield=0.05, slide=0.1, memory_steps=10, arm_clearance=0.01,
+                            guard_tool=True)
 """The layer the executor and ``rollout`` act with: two 5 mm steps from a bound, a 5 cm
 shield (chosen from 3, 5 and 8 cm on random worlds) that remembers the last 10 steps' near
 hits (10, 20 and 40 measured alike), a slide once less than a tenth of a step is left, and
-the arm held 1 cm off what the rays saw in the last 100 moving steps (1 and 2 cm, 100 to
-1024 steps measured; docs/training.md, "Acting")."""
+the arm and the tool held 1 cm off what the rays saw in the last 100 moving steps (1 and
+2 cm, 100 to 1024 steps measured for the arm; 0.5, 1 and 1.5 cm measured alike for the
+tool; docs/training.md, "Acting")."""
