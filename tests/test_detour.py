@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -9,7 +11,7 @@ from exp1_scenes import exp1_around_the_tool
 from rayreach.detour import Detour, DetourState
 from rayreach.env import ReachEnv
 from rayreach.policy import FinalApproach, distances_to_segment
-from rayreach.safety import ACTING_SAFETY
+from rayreach.safety import ACTING_SAFETY, SafetyLayer
 
 DOWN = np.array([0.0, 0.0, -1.0])
 LOW, HIGH = np.array([-0.4, -0.3, -0.2]), np.array([0.4, 0.3, 0.35])
@@ -134,6 +136,23 @@ def test_a_detour_the_arm_does_not_follow_hands_back_to_the_policy_for_a_stall_w
 def test_bad_settings_are_refused_by_name(field, value):
     with pytest.raises(ValueError, match=field):
         Detour(**{field: value})
+
+
+def test_on_the_detours_steps_the_shield_holds_off_only_what_is_nearer_than_the_clearance():
+    """A path keeps ``clearance`` from what was seen, so a wider shield would refuse the path's
+    own steps past a slot's plates; a hit nearer than the clearance is still held off."""
+    detour = Detour(clearance=0.04)
+    layer = detour.shield(ACTING_SAFETY)
+    assert layer.ray_shield == 0.04 and dataclasses.replace(layer, ray_shield=ACTING_SAFETY.ray_shield) == ACTING_SAFETY
+    ee, low, high = np.zeros(3), -np.ones(3), np.ones(3)
+    step = np.array([0.005, 0.0, 0.0, 0.0, 0.0, 0.0])
+    ahead = np.array([[1.0, 0.0, 0.0]])
+    for seen, kept in ((0.045, 0.005), (0.035, 0.0)):
+        assert layer.filter(step, ee, low, high, np.array([seen]), ahead)[0] == pytest.approx(kept)
+        assert ACTING_SAFETY.filter(step, ee, low, high, np.array([seen]), ahead)[0] == pytest.approx(0.0)
+    narrow = dataclasses.replace(ACTING_SAFETY, ray_shield=0.02)
+    assert detour.shield(narrow).ray_shield == 0.02  # never widened
+    assert detour.shield(SafetyLayer()) == SafetyLayer()  # off stays off
 
 
 def _idle(env: ReachEnv, steps: int = 1024) -> dict:

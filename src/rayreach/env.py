@@ -306,7 +306,8 @@ class ReachEnv(gym.Env):
         w = cfg.rewards
         shielded = 0.0
         rules = None
-        if cfg.safety.active:
+        layer = cfg.safety if detour is None else cfg.detour.shield(cfg.safety)  # type: ignore[union-attr]
+        if layer.active:
             scenario = self.scenario
             commanded = delta[:3]
             travel = None if straight is None else float(np.linalg.norm(offset))  # the straight step, in all
@@ -316,15 +317,15 @@ class ReachEnv(gym.Env):
                      *self._hit_memory.rays(self.ee_pos, self._ray_origins, self._ray_directions,
                                             self._ray_fractions * cfg.ray_range, cfg.safety.ray_shield), travel)
             # the final approach's turn was tested against every hit: the shield keeps it
-            delta = cfg.safety.filter(delta, *rules, towards_goal, keep_rotation=straight is not None)
+            delta = layer.filter(delta, *rules, towards_goal, keep_rotation=straight is not None)
             if straight is None and detour is None and not stalled:  # the policy's own step
                 shielded = R.shielded_reward(commanded, delta[:3], w)
 
-        ik, ee, taken = self._move(delta, straight is not None, rules)
+        ik, ee, taken = self._move(delta, straight is not None, layer, rules)
         for share in self.SHORTER if taken is None else ():
             # the arm's rule refused the step: a deterministic policy would repeat it, held, until
             # its step budget ran out (a KR16 tool stopped 0.5 mm short of the goal's tolerance)
-            ik, ee, taken = self._move(delta * share, straight is not None, rules)
+            ik, ee, taken = self._move(delta * share, straight is not None, layer, rules)
             if taken:
                 break
         if taken:
@@ -396,7 +397,7 @@ class ReachEnv(gym.Env):
     """Shares of a step the arm's rule refused that are tried in turn, the longest first:
     a shorter step may keep every blind link outside the rule's clearance."""
 
-    def _move(self, delta: np.ndarray, straight: bool,
+    def _move(self, delta: np.ndarray, straight: bool, layer: SafetyLayer,
               rules: tuple | None) -> tuple[IKResult, np.ndarray, bool | None]:
         """IK for the end-effector step ``delta``: the solution, its tool pose, and whether the
         step may be taken (True), not (False), or not by the arm's rule alone (None). Leaves
@@ -411,7 +412,7 @@ class ReachEnv(gym.Env):
             ik = self.kin.ik(target_pos, None, self.q, cfg.ik, start_frames=self.frames)
         ee = self.kin.ee_from_frames(ik.frames)
         # an unconverged IK step may move the tool where the layer did not let it: then it holds still
-        if not (rules is None or ik.converged or cfg.safety.allows(ee[:3, 3] - self.ee_pos, *rules)):
+        if not (rules is None or ik.converged or layer.allows(ee[:3, 3] - self.ee_pos, *rules)):
             return ik, ee, False
         if self._arm_guard is not None and not self._arm_guard.allows(self.q, ik.q, tool=not straight):  # moves the joints
             return ik, ee, None
