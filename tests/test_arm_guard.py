@@ -100,10 +100,10 @@ def test_points_in_one_voxel_are_measured_once_the_first_kept():
     assert _first_per_cell(points).tolist() == [0, 1, 3]
 
 
-def _wrist_step(point_side: float, steps: int = 1, memory: int = 5, gap: float = 0.015, link_name: str = "link_5",
-                guard_tool: bool = False) -> float:
+def _step_beside(point_side: float, steps: int = 1, memory: int = 5, gap: float = 0.015, link_name: str = "link_5",
+                 guard_tool: bool = False) -> float:
     """``steps`` +x steps of the KR16 in exp4 with one seen point placed ``gap`` off the
-    surface of ``link_name`` (the wrist) on the side ``point_side`` (+1: where the steps go),
+    surface of ``link_name`` (default: the wrist) on the side ``point_side`` (+1: where the steps go),
     the rule's clearance 2 cm. Returns how far the tool moved."""
     layer = SafetyLayer(arm_clearance=0.02, arm_memory_steps=memory, guard_tool=guard_tool)
     env = ReachEnv(robot="kr16", scenario="exp4", safety=layer)
@@ -128,17 +128,17 @@ def _wrist_step(point_side: float, steps: int = 1, memory: int = 5, gap: float =
 
 
 def test_a_step_that_sweeps_the_wrist_towards_a_seen_point_is_refused_and_one_away_is_taken():
-    assert _wrist_step(+1.0) == 0.0
-    moved = _wrist_step(-1.0)
+    assert _step_beside(+1.0) == 0.0
+    moved = _step_beside(-1.0)
     assert moved == pytest.approx(0.005, abs=5e-4)
 
 
 def test_a_refused_step_is_taken_shorter_where_that_keeps_the_clearance():
     """2.3 cm off the wrist, a full step would bring it within 2 cm; a share of it does not.
     A deterministic policy would otherwise repeat the refused step until its budget ran out."""
-    moved = _wrist_step(+1.0, gap=0.023)
+    moved = _step_beside(+1.0, gap=0.023)
     assert 0.005 * min(ReachEnv.SHORTER) - 5e-4 < moved < 0.005 * max(ReachEnv.SHORTER) + 5e-4
-    assert _wrist_step(+1.0, gap=0.035) == pytest.approx(0.005, abs=5e-4)  # far enough: the whole step
+    assert _step_beside(+1.0, gap=0.035) == pytest.approx(0.005, abs=5e-4)  # far enough: the whole step
 
 
 def test_unknown_or_meshless_links_are_refused_by_name():
@@ -155,9 +155,9 @@ def test_unknown_or_meshless_links_are_refused_by_name():
 def test_the_tool_is_held_off_a_seen_point_only_where_the_rule_watches_it():
     """The KR16's tool is blind between its rays: with ``guard_tool`` a step that sweeps its
     side towards a point seen 1.5 cm off it is refused; without, the step is taken."""
-    assert _wrist_step(+1.0, link_name=TOOL_LINK, guard_tool=True) == 0.0
-    assert _wrist_step(+1.0, link_name=TOOL_LINK) == pytest.approx(0.005, abs=5e-4)
-    assert _wrist_step(-1.0, link_name=TOOL_LINK, guard_tool=True) == pytest.approx(0.005, abs=5e-4)
+    assert _step_beside(+1.0, link_name=TOOL_LINK, guard_tool=True) == 0.0
+    assert _step_beside(+1.0, link_name=TOOL_LINK) == pytest.approx(0.005, abs=5e-4)
+    assert _step_beside(-1.0, link_name=TOOL_LINK, guard_tool=True) == pytest.approx(0.005, abs=5e-4)
 
 
 def test_the_final_approachs_step_leaves_the_tool_out_of_the_rule():
@@ -185,7 +185,7 @@ def test_the_final_approachs_step_leaves_the_tool_out_of_the_rule():
 def test_a_held_arm_does_not_forget_what_holds_it():
     """With a memory of one step, the point would be gone after the first held step if held
     steps counted; they do not, so the arm stays held."""
-    assert _wrist_step(+1.0, steps=5, memory=1) == 0.0
+    assert _step_beside(+1.0, steps=5, memory=1) == 0.0
 
 
 def test_arm_rule_settings_are_checked():

@@ -177,7 +177,7 @@ class ReachEnv(gym.Env):
         self.kin = Kinematics(self.spec_robot, base_pos, base_rpy)
         self.scene = Scene(self.spec_robot, base_pos, base_rpy, gui=render_mode == "human")
         self.rays = RayModel(self.spec_robot, self.config.ray_range)
-        self._blind_links = ArmCapsules(self.scene, (*self.spec_robot.blind_links, TOOL_LINK))
+        self._watched_links = ArmCapsules(self.scene, (*self.spec_robot.blind_links, TOOL_LINK))  # the arm's rule
         self.worlds = RandomWorlds(self.kin, self.scene, self.config.random_world) if self.random else None
         self.n_obstacles = self.config.random_world.n_obstacles
 
@@ -306,7 +306,7 @@ class ReachEnv(gym.Env):
         w = cfg.rewards
         shielded = 0.0
         rules = None
-        layer = cfg.safety if detour is None else cfg.detour.shield(cfg.safety)  # type: ignore[union-attr]
+        layer = cfg.safety if detour is None else self._detour.detour.shield(cfg.safety)  # type: ignore[union-attr]
         if layer.active:
             scenario = self.scenario
             commanded = delta[:3]
@@ -430,7 +430,7 @@ class ReachEnv(gym.Env):
         (which starts from the scene's joints as they are)."""
         layer = self.config.safety
         self._hit_memory = HitMemory(layer.memory_steps)
-        self._arm_guard = (ArmGuard(self._blind_links, layer.arm_clearance, layer.arm_memory_steps, layer.guard_tool)
+        self._arm_guard = (ArmGuard(self._watched_links, layer.arm_clearance, layer.arm_memory_steps, layer.guard_tool)
                            if layer.arm_clearance > 0 else None)
 
     def _start_detour(self) -> None:
