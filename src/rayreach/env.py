@@ -315,7 +315,7 @@ class ReachEnv(gym.Env):
                             else FinalApproach.towards(offset)[:3] * self._step_scale[:3])
             rules = (self.ee_pos, np.asarray(scenario.workspace_low), np.asarray(scenario.workspace_high),  # type: ignore[union-attr]
                      *self._hit_memory.rays(self.ee_pos, self._ray_origins, self._ray_directions,
-                                            self._ray_fractions * cfg.ray_range, cfg.safety.ray_shield), travel)
+                                            self._ray_lengths, cfg.safety.ray_shield), travel)
             # the final approach's turn was tested against every hit: the shield keeps it
             delta = layer.filter(delta, *rules, towards_goal, keep_rotation=straight is not None)
             if straight is None and detour is None and not stalled:  # the policy's own step
@@ -348,7 +348,7 @@ class ReachEnv(gym.Env):
         if taken:  # a held arm sees what it saw: the memory ages only as the arm moves
             self._remember_hits()
         if self._detour is not None:
-            self._detour.see(self._ray_origins, self._ray_directions, self._ray_fractions * cfg.ray_range)
+            self._detour.see(self._ray_origins, self._ray_directions, self._ray_lengths)
         terms = {
             "success": 0.0 if collided else R.success_reward(distance, self.tolerance, w),
             "collision": R.collision_reward(collided, w),
@@ -419,10 +419,11 @@ class ReachEnv(gym.Env):
         return ik, ee, True
 
     def _cast_rays(self) -> np.ndarray:
-        """Hit fractions of the rays in the current state (kept, with the rays, for the
-        final approach and the safety layer)."""
+        """Hit fractions of the rays in the current state (kept, with the rays and how far
+        each sees in metres, for the final approach, the safety layer and the detour)."""
         self._ray_origins, self._ray_directions = self.rays.world_rays(self.frames)
         self._ray_fractions = self.caster.cast(self._ray_origins, self._ray_directions, self.config.ray_range)
+        self._ray_lengths = self._ray_fractions * self.config.ray_range  # the range where nothing is seen
         return self._ray_fractions
 
     def _start_memories(self) -> None:
@@ -445,19 +446,22 @@ class ReachEnv(gym.Env):
         low = np.asarray(self.scenario.workspace_low) + guard  # type: ignore[union-attr]
         high = np.asarray(self.scenario.workspace_high) - guard  # type: ignore[union-attr]
         self._detour = DetourState(detour, spec.tool.length, spec.tool.radius, arrive, cfg.ray_range, low, high)
-        self._detour.see(self._ray_origins, self._ray_directions, self._ray_fractions * cfg.ray_range)
+        self._detour.see(self._ray_origins, self._ray_directions, self._ray_lengths)
 
     def _remember_hits(self) -> None:
         """Keep what the rays hit now for the arm's rule (``SafetyLayer.arm_clearance``)."""
         if self._arm_guard is not None:
-            self._arm_guard.seen.add(self.ray_hits() + self.ee_pos)
+            self._arm_guard.seen.add(self._hit_points())
+
+    def _hit_points(self) -> np.ndarray:
+        """The points the rays see now, in the world, m, shape (n, 3); rays that see nothing
+        within range are left out."""
+        hit = self._ray_fractions < 1.0
+        return self._ray_origins[hit] + self._ray_directions[hit] * self._ray_lengths[hit, None]
 
     def ray_hits(self) -> np.ndarray:
-        """The points the rays see now, relative to the end effector, m, shape (n, 3); rays
-        that see nothing within range are left out."""
-        hit = self._ray_fractions < 1.0
-        reach = self._ray_fractions[hit, None] * self.config.ray_range
-        return self._ray_origins[hit] + self._ray_directions[hit] * reach - self.ee_pos
+        """The points the rays see now, relative to the end effector, m, shape (n, 3)."""
+        return self._hit_points() - self.ee_pos
 
     def _observation(self, distance: float, rays: np.ndarray) -> np.ndarray:
         obs = np.empty(OBS_SIZE, dtype=np.float32)
