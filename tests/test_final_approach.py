@@ -119,7 +119,7 @@ def test_what_the_tool_is_already_near_blocks_only_a_path_that_comes_nearer():
 
 
 @pytest.mark.parametrize("field,value", [("radius", 0.0), ("margin", -0.01), ("ee_step", float("nan")),
-                                         ("rot_step", 0.0),
+                                         ("rot_step", 0.0), ("axial_radius", 0.0), ("axial_angle", -0.1),
                                          ("tool_length", -0.1), ("tool_radius", -0.02), ("stall_steps", -1),
                                          ("stall_steps", 2.5), ("stall_gain", 0.0)])
 def test_bad_settings_are_refused_by_name(field, value):
@@ -238,13 +238,41 @@ def test_the_stall_window_starts_again_at_each_goal():
         env.close()
 
 
+AXIAL = FinalApproach(radius=0.1, axial_radius=0.13, axial_angle=np.radians(15.0), ee_step=0.005)
+DOWN = np.array([0.0, 0.0, -1.0])
+
+
+@pytest.mark.parametrize("offset,straight", [
+    ((0.0, 0.0, -0.12), True),                                      # 12 cm below, along the tool
+    ((0.12 * np.sin(np.radians(10)), 0.0, -0.12 * np.cos(np.radians(10))), True),   # 10 deg off the axis
+    ((0.12 * np.sin(np.radians(20)), 0.0, -0.12 * np.cos(np.radians(20))), False),  # 20 deg off
+    ((0.12, 0.0, 0.0), False),                                      # 12 cm aside
+    ((0.0, 0.0, 0.12), False),                                      # 12 cm behind the tool
+    ((0.0, 0.0, -0.135), False),                                    # beyond the axial radius
+    ((0.09, 0.0, 0.0), True),                                       # within the radius, any way
+])
+def test_along_the_tools_axis_the_straight_path_starts_farther_out(offset, straight):
+    action = AXIAL.action(np.array(offset), NOTHING, DOWN)
+    assert (action is not None) == straight
+    if straight:  # along the offset, its largest axis a full step
+        np.testing.assert_allclose(action[:3], np.array(offset) / np.abs(offset).max(), atol=1e-6)
+
+
+def test_the_axial_radius_needs_the_tools_direction_and_still_tests_the_path():
+    assert AXIAL.action(np.array([0.0, 0.0, -0.12]), NOTHING) is None  # no axis given: the radius alone
+    wall = np.array([[0.0, 0.0, -0.06]])  # something seen on the path, 6 cm below
+    assert AXIAL.action(np.array([0.0, 0.0, -0.12]), wall, DOWN) is None
+    assert dataclasses.replace(AXIAL, axial_radius=None).action(np.array([0.0, 0.0, -0.12]), NOTHING, DOWN) is None
+
+
 def test_the_env_fills_in_the_robots_radius_unless_one_is_given():
-    for robot, radius in (("ur5", 0.1), ("kr16", 0.2)):
+    for robot, radius, axial in (("ur5", 0.1, 0.13), ("kr16", 0.2, None)):
         env = ReachEnv(robot=robot, scenario="random", final_approach=FinalApproach())
         try:
             assert env.final_approach.radius == get_robot(robot).final_approach_radius == radius
-            env.set_final_approach(FinalApproach(radius=0.15))
-            assert env.final_approach.radius == 0.15
+            assert env.final_approach.axial_radius == get_robot(robot).final_approach_axial_radius == axial
+            env.set_final_approach(FinalApproach(radius=0.15, axial_radius=0.2))
+            assert env.final_approach.radius == 0.15 and env.final_approach.axial_radius == 0.2
         finally:
             env.close()
     with pytest.raises(ValueError, match="radius"):

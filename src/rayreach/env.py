@@ -217,7 +217,9 @@ class ReachEnv(gym.Env):
         self._final_approach = None if approach is None else replace(
             approach, ee_step=self.spec_robot.ee_step, rot_step=self.spec_robot.rot_step,
             tool_length=tool.length, tool_radius=tool.radius,
-            radius=self.spec_robot.final_approach_radius if approach.radius is None else approach.radius)
+            radius=self.spec_robot.final_approach_radius if approach.radius is None else approach.radius,
+            axial_radius=(self.spec_robot.final_approach_axial_radius if approach.axial_radius is None
+                          else approach.axial_radius))
 
     def set_detour(self, detour: Detour | None) -> None:
         """Take a stalled policy round what the rays see with ``detour`` (None: never) from the
@@ -233,7 +235,7 @@ class ReachEnv(gym.Env):
     @property
     def final_approach(self) -> FinalApproach | None:
         """The final approach as applied: ``config.final_approach`` with the robot's step and tool,
-        and its radius unless the config gives one."""
+        and its radii unless the config gives them."""
         return self._final_approach
 
     def set_n_obstacles(self, n: int) -> None:

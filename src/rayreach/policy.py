@@ -9,6 +9,7 @@ the curricula, so training resumes where it stopped.
 from __future__ import annotations
 
 import io
+import math
 import json
 import os
 import tempfile
@@ -144,10 +145,10 @@ class FinalApproach:
     training), so a deterministic rollout times out beside a goal it has reached in all but
     name (docs/training.md, "Acting"). The environment applies it
     (``EnvConfig.final_approach``), where the rays' hit points are known, and sets the
-    robot's step and tool (and radius, unless one is given). The straight path is
-    ``radius`` long at most. Where only the tool's back blocks it, the tool first turns
-    about its tip towards the path (``turn``). From farther away it can nudge a policy that
-    has stalled towards the goal (``stall_steps``, off by default)."""
+    robot's step and tool (and radii, unless given). The straight path is ``radius`` long at
+    most (``axial_radius`` along the tool's axis). Where only the tool's back blocks it, the
+    tool first turns about its tip towards the path (``turn``). From farther away it can
+    nudge a policy that has stalled towards the goal (``stall_steps``, off by default)."""
 
     NEARER: ClassVar[float] = 0.001
     """How much nearer, m, the path may bring the tool to what it sees than the nearest hit
@@ -162,6 +163,14 @@ class FinalApproach:
     reliably comes this close to; from 0.13 m on, its straight paths ran under moving goal
     covers whose thin edges no ray saw, and the tool met them. The KR16's is 0.2 m, where it
     met nothing more."""
+    axial_radius: float | None = None
+    """None: the robot's (``RobotSpec.final_approach_axial_radius``). From within this
+    distance too, m, but only where the path lies within ``axial_angle`` of the tool's axis:
+    a tool moving along its own axis sweeps little more than the cone its tip rays look
+    into. The UR5's policy descends onto a goal below it, as in exp1, from 0.12 m; a radius
+    of 0.13 m in every direction drove its tool under moving goal covers."""
+    axial_angle: float = math.radians(15.0)
+    """Largest angle, rad, between the tool's axis and the path for ``axial_radius``."""
     margin: float = 0.01
     """Least clearance, m, between the tool's surface on the straight path and anything a ray
     sees. Testing the path rather than every ray lets the tool pass beside a wall next to
@@ -193,7 +202,7 @@ class FinalApproach:
     refused again and again and the run timed out (docs/training.md, "Acting")."""
 
     def __post_init__(self) -> None:
-        for name in ("radius", "ee_step", "rot_step", "stall_gain"):
+        for name in ("radius", "axial_radius", "axial_angle", "ee_step", "rot_step", "stall_gain"):
             if getattr(self, name) is not None and not getattr(self, name) > 0:
                 raise ValueError(f"{name} must be positive, got {getattr(self, name)}")
         for name in ("margin", "tool_length", "tool_radius", "stall_steps"):
@@ -231,7 +240,7 @@ class FinalApproach:
         if self.radius is None:
             raise ValueError("FinalApproach.radius is None: give one, or let ReachEnv fill in the robot's")
         goal_offset = np.asarray(goal_offset, dtype=float)
-        if float(np.linalg.norm(goal_offset)) >= self.radius:
+        if not self.within_reach(goal_offset, tool_direction):
             return None
         if len(hits):
             hits = np.asarray(hits, dtype=float)
@@ -246,6 +255,16 @@ class FinalApproach:
         action = np.zeros(6, dtype=np.float32)
         action[:3] = goal_offset / max(float(np.abs(goal_offset).max()), self.ee_step)
         return action
+
+    def within_reach(self, goal_offset: np.ndarray, tool_direction: np.ndarray | None = None) -> bool:
+        """Whether the goal, ``goal_offset`` (m) from the end effector, is near enough to step
+        straight at: within ``radius``, or within ``axial_radius`` along the tool's axis."""
+        distance = float(np.linalg.norm(goal_offset))
+        if distance < self.radius:  # type: ignore[operator]
+            return True
+        if self.axial_radius is None or tool_direction is None or distance >= self.axial_radius:
+            return False
+        return float(np.asarray(goal_offset, float) @ np.asarray(tool_direction, float)) > distance * math.cos(self.axial_angle)
 
     def _turn(self, goal_offset: np.ndarray, hits: np.ndarray, tool_direction: np.ndarray | None,
               now: float) -> np.ndarray | None:
