@@ -101,11 +101,12 @@ def test_points_in_one_voxel_are_measured_once_the_first_kept():
 
 
 def _step_beside(point_side: float, steps: int = 1, memory: int = 5, gap: float = 0.015, link_name: str = "link_5",
-                 guard_tool: bool = False) -> float:
+                 guard_tool: bool = False, arm_clearance: float = 0.02, tool_clearance: float | None = None) -> float:
     """``steps`` +x steps of the KR16 in exp4 with one seen point placed ``gap`` off the
     surface of ``link_name`` (default: the wrist) on the side ``point_side`` (+1: where the steps go),
-    the rule's clearance 2 cm. Returns how far the tool moved."""
-    layer = SafetyLayer(arm_clearance=0.02, arm_memory_steps=memory, guard_tool=guard_tool)
+    the rule's clearance 2 cm unless given. Returns how far the tool moved."""
+    layer = SafetyLayer(arm_clearance=arm_clearance, arm_memory_steps=memory, guard_tool=guard_tool,
+                        tool_clearance=tool_clearance)
     env = ReachEnv(robot="kr16", scenario="exp4", safety=layer)
     try:
         env.reset(seed=0)
@@ -160,6 +161,18 @@ def test_the_tool_is_held_off_a_seen_point_only_where_the_rule_watches_it():
     assert _step_beside(-1.0, link_name=TOOL_LINK, guard_tool=True) == pytest.approx(0.005, abs=5e-4)
 
 
+def test_the_tool_and_the_arm_are_each_held_to_their_own_clearance():
+    """A point 1.8 cm off the tool holds it at a 2 cm tool clearance and not at 1 cm (a 5 mm
+    step leaves 1.3 cm), whatever the arm's; a point 1.8 cm off the wrist holds it at the
+    arm's 2 cm, whatever the tool's."""
+    tool = dict(link_name=TOOL_LINK, guard_tool=True, gap=0.018)
+    assert _step_beside(+1.0, arm_clearance=0.01, tool_clearance=0.02, **tool) == 0.0
+    assert _step_beside(+1.0, arm_clearance=0.02, tool_clearance=0.01, **tool) == pytest.approx(0.005, abs=5e-4)
+    assert _step_beside(+1.0, arm_clearance=0.02, tool_clearance=0.01, guard_tool=True, gap=0.018) == 0.0
+    assert _step_beside(+1.0, arm_clearance=0.01, tool_clearance=0.02, guard_tool=True,
+                        gap=0.018) == pytest.approx(0.005, abs=5e-4)
+
+
 def test_the_final_approachs_step_leaves_the_tool_out_of_the_rule():
     """``tool=False`` (the env's final-approach steps, whose straight path was tested against
     every hit already) measures the arm alone: a point beside the tool holds the step only
@@ -195,3 +208,5 @@ def test_arm_rule_settings_are_checked():
         SafetyLayer(arm_memory_steps=2.5)
     with pytest.raises(ValueError, match="guard_tool is True or False, got 'yes'"):
         SafetyLayer(guard_tool="yes")
+    with pytest.raises(ValueError, match="tool_clearance must be > 0"):
+        SafetyLayer(tool_clearance=0.0)

@@ -43,7 +43,7 @@ def test_shipped_policy_loads_with_metadata_and_runs_an_episode(robot, scenario)
     assert 0 < record.steps <= 1024 and record.config["timesteps"] == meta["timesteps"]
     assert record.config["safety"] == {"workspace_guard": 0.01, "ray_shield": 0.05, "slide": 0.1, "memory_steps": 10,
                                        "arm_clearance": 0.01, "arm_memory_steps": 100,
-                                       "guard_tool": True}  # the executor's defaults
+                                       "guard_tool": True, "tool_clearance": 0.02}  # the executor's defaults
     spec = get_robot(robot)  # the env fills in the robot's radius, step and tool
     assert record.config["final_approach"] == {"radius": spec.final_approach_radius, "margin": FinalApproach.margin,
                                                "ee_step": 0.005, "rot_step": spec.rot_step,
@@ -97,7 +97,8 @@ def test_drl_alone_runs_the_policy_without_the_acting_layers_and_restores_them()
         again = ex.run(make_planner("drl", "ur5"), seed=0)
     assert record.planner == "drl-alone" and record.config["final_approach"] is None and record.config["detour"] is None
     assert record.config["safety"] == {"workspace_guard": 0.0, "ray_shield": 0.0, "slide": 0.0, "memory_steps": 0,
-                                       "arm_clearance": 0.0, "arm_memory_steps": 100, "guard_tool": False}
+                                       "arm_clearance": 0.0, "arm_memory_steps": 100, "guard_tool": False,
+                                       "tool_clearance": None}
     env = ReachEnv(robot="ur5", scenario="exp1")  # no final approach, no safety layer
     try:
         obs, info = env.reset(seed=0)
@@ -225,6 +226,20 @@ def test_the_ur5s_tool_is_held_off_a_box_it_saw():
     assert rollout(MODELS_DIR / "ur5.zip", "random", **world).outcomes["success"] == 1
     unguarded = dataclasses.replace(ACTING_SAFETY, guard_tool=False)
     assert rollout(MODELS_DIR / "ur5.zip", "random", safety=unguarded, **world).outcomes["collision"] == 1
+
+
+def test_the_ur5s_tool_keeps_its_own_clearance_from_a_moving_cover():
+    """A random world (seed 1,000,173) with a moving cover over the goal: held 1 cm off what
+    its rays saw, the tool strikes the cover on its way in; held 2 cm off
+    (``SafetyLayer.tool_clearance``, the acting default), it reaches the goal."""
+    from rayreach.rollout import rollout
+    from rayreach.safety import ACTING_SAFETY
+
+    world = dict(episodes=1, seed=1_000_173, progress=False)
+    assert ACTING_SAFETY.tool_clearance == 0.02
+    assert rollout(MODELS_DIR / "ur5.zip", "random", **world).outcomes["success"] == 1
+    near = dataclasses.replace(ACTING_SAFETY, tool_clearance=0.01)
+    assert rollout(MODELS_DIR / "ur5.zip", "random", safety=near, **world).outcomes["collision"] == 1
 
 
 def test_the_ur5_is_taken_round_a_goal_slot_it_hovers_above():

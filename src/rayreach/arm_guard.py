@@ -149,31 +149,34 @@ class SeenPoints:
 class ArmGuard:
     """The arm's rule for one episode (``SafetyLayer.arm_clearance``): remembers what the rays
     hit and tells whether a joint step keeps the blind links clear of it, and the tool too
-    where ``links`` holds it (``TOOL_LINK``) and ``tool`` is set
-    (``SafetyLayer.guard_tool``). Made where the scene's joints are at the start."""
+    where ``links`` holds it (``TOOL_LINK``) and ``tool`` is set (``SafetyLayer.guard_tool``),
+    at ``tool_clearance`` (None: ``clearance``). Made where the scene's joints are at the start."""
 
-    def __init__(self, links: ArmCapsules, clearance: float, steps: int, tool: bool = False) -> None:
+    def __init__(self, links: ArmCapsules, clearance: float, steps: int, tool: bool = False,
+                 tool_clearance: float | None = None) -> None:
         self.scene = links.scene
         self.links = links
-        self.clearance = clearance
         self.seen = SeenPoints(steps)
-        self._with_tool = links.mask(() if tool else (TOOL_LINK,))
-        self._arm = links.mask((TOOL_LINK,))
+        arm, only_tool = links.mask((TOOL_LINK,)), ~links.mask((TOOL_LINK,))
+        self._arm = [(arm, clearance)]
+        self._with_tool = self._arm + ([(only_tool, clearance if tool_clearance is None else tool_clearance)]
+                                       if tool and only_tool.any() else [])
         self._ends = self.links.world()  # where the last allowed step left the capsules
 
     def allows(self, q_now: np.ndarray, q: np.ndarray, tool: bool = True) -> bool:
         """Whether moving the joints from ``q_now`` (where the last allowed step left them)
-        to ``q`` keeps every watched link ``clearance`` from what the rays have seen, or
-        brings none nearer than it is now; ``tool=False`` leaves the tool out this step.
-        Leaves the scene's joints at ``q`` or ``q_now``."""
+        to ``q`` keeps the arm links and the tool each their clearance from what the rays have
+        seen, or brings them no nearer than they are now; ``tool=False`` leaves the tool out
+        this step. Leaves the scene's joints at ``q`` or ``q_now``."""
         self.scene.set_joints(q)
         ends = self.links.world()
         points = self.seen.points()
-        use = self._with_tool if tool else self._arm
-        after = self.links.clearance(points, self.clearance, ends, use)
-        if after < self.clearance:
-            self.scene.set_joints(q_now)
-            if after < self.links.clearance(points, self.clearance, self._ends, use):
-                return False
+        for use, clearance in self._with_tool if tool else self._arm:
+            after = self.links.clearance(points, clearance, ends, use)
+            if after < clearance:
+                self.scene.set_joints(q_now)
+                if after < self.links.clearance(points, clearance, self._ends, use):
+                    return False
+                self.scene.set_joints(q)
         self._ends = ends
         return True

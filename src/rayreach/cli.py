@@ -148,6 +148,8 @@ def build_parser() -> argparse.ArgumentParser:
                            f"{ACTING_SAFETY.arm_memory_steps} steps, m (0: off; rayreach.arm_guard)")
     roll.add_argument("--no-guard-tool", action="store_true",
                       help="the arm's rule watches the arm's blind links only, not the tool (rayreach.arm_guard)")
+    roll.add_argument("--tool-clearance", type=float, default=ACTING_SAFETY.tool_clearance,
+                      help="the clearance the arm's rule keeps the tool at, m (rayreach.safety.SafetyLayer)")
     roll.add_argument("--no-resample", action="store_true",
                       help="act on the policy's mean action even where the arm is held and the observation repeats "
                            "(rayreach.policy.ActingPolicy)")
@@ -400,7 +402,7 @@ def _rollout(args: argparse.Namespace, scenario: str) -> int:
     from rayreach.safety import SafetyLayer
 
     safety = SafetyLayer(args.workspace_guard, args.ray_shield, args.slide, args.memory_steps, args.arm_clearance,
-                         guard_tool=not args.no_guard_tool)
+                         guard_tool=not args.no_guard_tool, tool_clearance=args.tool_clearance)
     summary = rollout(args.model, scenario, episodes=args.episodes, deterministic=not args.stochastic,
                       goal_tolerance=args.tolerance, n_obstacles=args.obstacles, progress=not args.json,
                       final_approach=None if args.no_final_approach

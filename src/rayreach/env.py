@@ -433,8 +433,8 @@ class ReachEnv(gym.Env):
         (which starts from the scene's joints as they are)."""
         layer = self.config.safety
         self._hit_memory = HitMemory(layer.memory_steps)
-        self._arm_guard = (ArmGuard(self._watched_links, layer.arm_clearance, layer.arm_memory_steps, layer.guard_tool)
-                           if layer.arm_clearance > 0 else None)
+        self._arm_guard = (ArmGuard(self._watched_links, layer.arm_clearance, layer.arm_memory_steps, layer.guard_tool,
+                                    layer.tool_clearance) if layer.arm_clearance > 0 else None)
 
     def _start_detour(self) -> None:
         """A fresh detour for the episode, which has seen what the rays see at the start."""

@@ -55,6 +55,10 @@ class SafetyLayer:
     with the tool's shape already and may pass a wall nearer than ``arm_clearance``. A thin
     plate seen edge-on slips between the rays; a tool that saw it a few steps earlier swept
     its side into it (docs/training.md, "Acting")."""
+    tool_clearance: float | None = None
+    """The clearance, m, the arm's rule keeps the tool at when ``guard_tool`` is set; None:
+    ``arm_clearance``. The tool and the arm links are each held to their own: a plate's
+    edge lies a centimetre or two beyond the last point the rays hit on its face."""
 
     def __post_init__(self) -> None:
         for name in ("workspace_guard", "ray_shield", "slide", "memory_steps", "arm_clearance", "arm_memory_steps"):
@@ -63,6 +67,8 @@ class SafetyLayer:
         for name in ("memory_steps", "arm_memory_steps"):
             if getattr(self, name) != int(getattr(self, name)):
                 raise ValueError(f"{name} counts steps, a whole number, got {getattr(self, name)}")
+        if self.tool_clearance is not None and not self.tool_clearance > 0:
+            raise ValueError(f"tool_clearance must be > 0 (None: arm_clearance), got {self.tool_clearance}")
         if not isinstance(self.guard_tool, (bool, np.bool_)):
             raise ValueError(f"guard_tool is True or False, got {self.guard_tool!r}")
         if self.slide > 1:
@@ -244,10 +250,10 @@ def nearest_in_cone(move: np.ndarray, normals: np.ndarray, tolerance: float = 0.
 
 
 ACTING_SAFETY = SafetyLayer(workspace_guard=0.01, ray_shield=0.05, slide=0.1, memory_steps=10, arm_clearance=0.01,
-                            guard_tool=True)
+                            guard_tool=True, tool_clearance=0.02)
 """The layer the executor and ``rollout`` act with: two 5 mm steps from a bound, a 5 cm
 shield (chosen from 3, 5 and 8 cm on random worlds) that remembers the last 10 steps' near
 hits (10, 20 and 40 measured alike), a slide once less than a tenth of a step is left, and
-the arm and the tool held 1 cm off what the rays saw in the last 100 moving steps (1 and
-2 cm, 100 to 1024 steps measured for the arm; 0.5, 1 and 1.5 cm measured alike for the
-tool; docs/training.md, "Acting")."""
+the arm held 1 cm and the tool 2 cm off what the rays saw in the last 100 moving steps (1
+and 2 cm, 100 to 1024 steps measured for the arm; 1, 1.5 and 2 cm for the tool on its own;
+docs/training.md, "Acting")."""
