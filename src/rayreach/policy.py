@@ -9,8 +9,8 @@ the curricula, so training resumes where it stopped.
 from __future__ import annotations
 
 import io
-import math
 import json
+import math
 import os
 import tempfile
 import zipfile
@@ -168,7 +168,8 @@ class FinalApproach:
     distance too, m, but only where the path lies within ``axial_angle`` of the tool's axis:
     a tool moving along its own axis sweeps little more than the cone its tip rays look
     into. The UR5's policy descends onto a goal below it, as in exp1, from 0.12 m; a radius
-    of 0.13 m in every direction drove its tool under moving goal covers."""
+    of 0.13 m in every direction drove its tool under moving goal covers. At or below
+    ``radius`` it changes nothing."""
     axial_angle: float = math.radians(15.0)
     """Largest angle, rad, between the tool's axis and the path for ``axial_radius``."""
     margin: float = 0.01
@@ -264,7 +265,8 @@ class FinalApproach:
             return True
         if self.axial_radius is None or tool_direction is None or distance >= self.axial_radius:
             return False
-        return float(np.asarray(goal_offset, float) @ np.asarray(tool_direction, float)) > distance * math.cos(self.axial_angle)
+        along = float(np.asarray(goal_offset, float) @ np.asarray(tool_direction, float))
+        return along > distance * math.cos(self.axial_angle)
 
     def _turn(self, goal_offset: np.ndarray, hits: np.ndarray, tool_direction: np.ndarray | None,
               now: float) -> np.ndarray | None:
