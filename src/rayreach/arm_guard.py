@@ -157,7 +157,8 @@ class ArmGuard:
         self.scene = links.scene
         self.links = links
         self.seen = SeenPoints(steps)
-        arm, only_tool = links.mask((TOOL_LINK,)), ~links.mask((TOOL_LINK,))
+        arm = links.mask((TOOL_LINK,))
+        only_tool = ~arm
         self._arm = [(arm, clearance)]
         self._with_tool = self._arm + ([(only_tool, clearance if tool_clearance is None else tool_clearance)]
                                        if tool and only_tool.any() else [])
