@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from rayreach.kinematics import Kinematics
+from rayreach.sim.kinematics import Kinematics
 from rayreach.robots import get_robot
-from rayreach.scene import Scene
-from rayreach.sensors import RayModel
+from rayreach.sim.scene import Scene
+from rayreach.sim.sensors import RayModel
 
 ROBOTS = ("ur5", "kr16")
 

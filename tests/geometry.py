@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from rayreach.scenarios.schema import ObstacleSpec
-from rayreach.transforms import rpy_to_matrix
+from rayreach.sim.transforms import rpy_to_matrix
 
 
 def signed_distance(obs: ObstacleSpec, points: np.ndarray, t: float = 0.0) -> np.ndarray:

@@ -1,18 +1,27 @@
-"""The arm's rule: capsules against plain geometry and PyBullet's own distances, then in the env."""
+"""The arm's rule: capsules against plain geometry and PyBullet's own distances, the seen
+points it reads from the ray memory, then acting through ``ActingEnv``."""
 
 from __future__ import annotations
+
+import dataclasses
 
 import numpy as np
 import pybullet as p
 import pytest
 
-from rayreach.arm_guard import PAD, PROBE, VOXEL, ArmCapsules, SeenPoints, _capsule, _first_per_cell
-from rayreach.env import ReachEnv
-from rayreach.policy import distances_to_segment
+from exp1_scenes import layers
+from rayreach.acting import ActingEnv
+from rayreach.acting.arm_guard import PAD, PROBE, VOXEL, ArmCapsules, _capsule, _first_per_cell
+from rayreach.acting.controller import SHORTER
+from rayreach.acting.layers import ArmRule
+from rayreach.acting.memory import RayMemory
+from rayreach.acting.shield import SafetyLayer
+from rayreach.env.perception import Perception
+from rayreach.env.reach import ReachEnv
 from rayreach.robots import get_robot
 from rayreach.robots.urdf import TCP_LINK, TOOL_LINK
-from rayreach.safety import SafetyLayer
-from rayreach.scene import Scene
+from rayreach.sim.geometry import distances_to_segment
+from rayreach.sim.scene import Scene
 
 
 def test_a_fitted_capsule_holds_a_cylinders_points_and_no_more_than_needed():
@@ -81,18 +90,48 @@ def test_clearance_misses_no_point_pybullet_finds_near_a_blind_link(robot):
         scene.close()
 
 
+RANGE = 0.4
+
+
+def _seeing(points: np.ndarray, base: Perception | None = None) -> Perception:
+    """A perception whose rays hit ``points`` (world, (n, 3)), each from 1 cm before it, plus one
+    ray that sees nothing; or ``base`` with those rays added to its own."""
+    points = np.asarray(points, dtype=float).reshape(-1, 3)
+    direction = np.array([0.0, 0.0, -1.0])
+    origins = np.vstack([points - 0.01 * direction, np.zeros((1, 3))])
+    directions = np.tile(direction, (len(origins), 1))
+    lengths = np.r_[np.full(len(points), 0.01), RANGE]
+    if base is None:
+        return Perception(step=0, q=np.zeros(6), ee_position=np.zeros(3), ee_rotation=np.eye(3), goal=np.zeros(3),
+                          origins=origins, directions=directions, lengths=lengths, fractions=lengths / RANGE,
+                          workspace_low=-np.ones(3), workspace_high=np.ones(3))
+    return dataclasses.replace(base, origins=np.vstack([base.origins, origins]),
+                               directions=np.vstack([base.directions, directions]),
+                               lengths=np.r_[base.lengths, lengths], fractions=np.r_[base.fractions, lengths / RANGE])
+
+
 def test_seen_points_forget_old_steps():
-    seen = SeenPoints(steps=2)
-    assert seen.points().shape == (0, 3)
-    seen.add(np.array([[0.0, 0.0, 0.0], [0.01, 0.0, 0.0]]))
-    seen.add(np.array([[1.0, 0.0, 0.0]]))
-    np.testing.assert_allclose(seen.points(), [[0.0, 0.0, 0.0], [0.01, 0.0, 0.0], [1.0, 0.0, 0.0]])
-    seen.add(np.zeros((0, 3)))
-    seen.add(np.array([[2.0, 0.0, 0.0]]))
-    np.testing.assert_allclose(seen.points(), [[2.0, 0.0, 0.0]])
-    nothing = SeenPoints(steps=0)
-    nothing.add(np.ones((3, 3)))
-    assert nothing.points().shape == (0, 3)
+    memory = RayMemory()
+    assert memory.seen_points(2).shape == (0, 3)
+    memory.add(_seeing([[0.0, 0.0, 0.0], [0.01, 0.0, 0.0]]), moved=True)
+    memory.add(_seeing([[1.0, 0.0, 0.0]]), moved=True)
+    np.testing.assert_allclose(memory.seen_points(2), [[0.0, 0.0, 0.0], [0.01, 0.0, 0.0], [1.0, 0.0, 0.0]])
+    memory.add(_seeing(np.zeros((0, 3))), moved=True)
+    memory.add(_seeing([[2.0, 0.0, 0.0]]), moved=True)
+    np.testing.assert_allclose(memory.seen_points(2), [[2.0, 0.0, 0.0]])
+    assert memory.seen_points(0).shape == (0, 3)
+
+
+def test_seen_points_age_only_as_the_arm_moves():
+    """Scans after a held step add nothing and do not push the older ones out."""
+    memory = RayMemory()
+    memory.add(_seeing([[0.0, 0.0, 0.0]]), moved=True)
+    memory.add(_seeing([[1.0, 0.0, 0.0]]), moved=False)
+    memory.add(_seeing([[2.0, 0.0, 0.0]]), moved=False)
+    np.testing.assert_allclose(memory.seen_points(1), [[0.0, 0.0, 0.0]])
+    memory.add(_seeing([[3.0, 0.0, 0.0]]), moved=True)
+    np.testing.assert_allclose(memory.seen_points(1), [[3.0, 0.0, 0.0]])
+    np.testing.assert_allclose(memory.seen_points(5), [[0.0, 0.0, 0.0], [3.0, 0.0, 0.0]])
 
 
 def test_points_in_one_voxel_are_measured_once_the_first_kept():
@@ -100,32 +139,53 @@ def test_points_in_one_voxel_are_measured_once_the_first_kept():
     assert _first_per_cell(points).tolist() == [0, 1, 3]
 
 
-def _step_beside(point_side: float, steps: int = 1, memory: int = 5, gap: float = 0.015, link_name: str = "link_5",
-                 guard_tool: bool = False, arm_clearance: float = 0.02, tool_clearance: float | None = None) -> float:
-    """``steps`` +x steps of the KR16 in exp4 with one seen point placed ``gap`` off the
-    surface of ``link_name`` (default: the wrist) on the side ``point_side`` (+1: where the steps go),
-    the rule's clearance 2 cm unless given. Returns how far the tool moved."""
+def _arm_rule(env: ActingEnv) -> ArmRule:
+    """The arm's rule among ``env``'s components."""
+    (rule,) = [c for c in env.components if isinstance(c, ArmRule)]
+    return rule
+
+
+def _walk_beside(point_side: float, steps: int = 1, memory: int = 5, gap: float = 0.015, link_name: str = "link_5",
+                 guard_tool: bool = False, arm_clearance: float = 0.02, tool_clearance: float | None = None,
+                 without: tuple[str, ...] = ()) -> tuple[float, list[dict]]:
+    """``steps`` +x steps of the KR16 in exp4, acting through the arm's rule alone (and not
+    even that with ``without=("arm_guard",)``), with one seen point placed ``gap`` off the
+    surface of ``link_name`` (default: the wrist) on the side ``point_side`` (+1: where the
+    steps go), the rule's clearance 2 cm unless given. The point enters the ray memory as one
+    more ray of the start's scan. Returns how far the tool moved and each step's
+    ``info["acting"]``."""
     layer = SafetyLayer(arm_clearance=arm_clearance, arm_memory_steps=memory, guard_tool=guard_tool,
                         tool_clearance=tool_clearance)
-    env = ReachEnv(robot="kr16", scenario="exp4", safety=layer)
+    env = ActingEnv(ReachEnv(robot="kr16", scenario="exp4"), layers(safety=layer).without(*without))
+    reach = env.unwrapped
     try:
         env.reset(seed=0)
-        scene, link = env.scene, env.scene.link_indices[link_name]
-        wrist = env._arm_guard.links.links.index(link)
-        a, b = env._arm_guard.links.world()
+        scene, link = reach.scene, reach.scene.link_indices[link_name]
+        capsules = ArmCapsules(scene, (*reach.spec_robot.blind_links, TOOL_LINK))
+        wrist = capsules.links.index(link)
+        a, b = capsules.world()
         outward = point_side * np.array([1.0, 0.0, 0.0])
         far = (a[wrist] + b[wrist]) / 2 + 0.5 * outward
         probe = p.createCollisionShape(p.GEOM_SPHERE, radius=1e-4, physicsClientId=scene.client)
         close = p.getClosestPoints(scene.robot, -1, 1.0, linkIndexA=link, collisionShapeB=probe,
                                    collisionShapePositionB=far.tolist(), physicsClientId=scene.client)
         surface = np.asarray(min(close, key=lambda c: c[8])[5])
-        env._arm_guard.seen.add((surface + gap * outward)[None])
-        before = env.ee_pos.copy()
+        point = surface + gap * outward
+        env.memory.add(_seeing(point[None], base=env.memory.now), moved=True)
+        assert any(np.allclose(seen, point) for seen in env.memory.seen_points(memory))
+        before = reach.ee_pos.copy()
+        acting = []
         for _ in range(steps):
             _, _, _, _, info = env.step(np.array([1.0, 0, 0, 0, 0, 0], np.float32))
-        return float(np.linalg.norm(info["ee_position"] - before))
+            acting.append(info["acting"])
+        return float(np.linalg.norm(info["ee_position"] - before)), acting
     finally:
         env.close()
+
+
+def _step_beside(point_side: float, **options) -> float:
+    """How far the tool moved in ``_walk_beside``."""
+    return _walk_beside(point_side, **options)[0]
 
 
 def test_a_step_that_sweeps_the_wrist_towards_a_seen_point_is_refused_and_one_away_is_taken():
@@ -137,8 +197,9 @@ def test_a_step_that_sweeps_the_wrist_towards_a_seen_point_is_refused_and_one_aw
 def test_a_refused_step_is_taken_shorter_where_that_keeps_the_clearance():
     """2.3 cm off the wrist, a full step would bring it within 2 cm; a share of it does not.
     A deterministic policy would otherwise repeat the refused step until its budget ran out."""
-    moved = _step_beside(+1.0, gap=0.023)
-    assert 0.005 * min(ReachEnv.SHORTER) - 5e-4 < moved < 0.005 * max(ReachEnv.SHORTER) + 5e-4
+    moved, acting = _walk_beside(+1.0, gap=0.023)
+    assert 0.005 * min(SHORTER) - 5e-4 < moved < 0.005 * max(SHORTER) + 5e-4
+    assert acting == [{"source": "policy", "proposed": "policy", "held": False}]
     assert _step_beside(+1.0, gap=0.035) == pytest.approx(0.005, abs=5e-4)  # far enough: the whole step
 
 
@@ -174,31 +235,47 @@ def test_the_tool_and_the_arm_are_each_held_to_their_own_clearance():
 
 
 def test_the_final_approachs_step_leaves_the_tool_out_of_the_rule():
-    """``tool=False`` (the env's final-approach steps, whose straight path was tested against
+    """``tool=False`` (the final approach's steps, whose straight path was tested against
     every hit already) measures the arm alone: a point beside the tool holds the step only
     when the tool is watched."""
-    env = ReachEnv(robot="kr16", scenario="exp4", safety=SafetyLayer(arm_clearance=0.02, guard_tool=True))
+    env = ActingEnv(ReachEnv(robot="kr16", scenario="exp4"),
+                    layers(safety=SafetyLayer(arm_clearance=0.02, guard_tool=True)))
+    reach = env.unwrapped
     try:
         env.reset(seed=0)
-        guard, tool = env._arm_guard, env.scene.link_indices[TOOL_LINK]
+        guard, tool = _arm_rule(env).guard, reach.scene.link_indices[TOOL_LINK]
         a, b = guard.links.world()
         k = guard.links.links.index(tool)
         axis = (b[k] - a[k]) / np.linalg.norm(b[k] - a[k])
         side = np.cross(axis, [0.0, 0.0, 1.0])
         side /= np.linalg.norm(side)
-        guard.seen.add(((a[k] + b[k]) / 2 + (guard.links.radii[k] + 0.015) * side)[None])
-        ik = env.kin.ik(env.ee_pos + 0.005 * side, env.ee_rot, env.q, env.config.ik, start_frames=env.frames)
+        points = np.vstack([env.memory.seen_points(100), (a[k] + b[k]) / 2 + (guard.links.radii[k] + 0.015) * side])
+        ik = reach.solve(np.r_[0.005 * side, 0.0, 0.0, 0.0])
         assert ik.converged
-        assert not guard.allows(env.q, ik.q)
-        assert guard.allows(env.q, ik.q, tool=False)
+        assert guard.allows(reach.q, ik.q, env.memory.seen_points(100))  # what the rays saw alone: no hold
+        assert not guard.allows(reach.q, ik.q, points)
+        assert guard.allows(reach.q, ik.q, points, tool=False)
     finally:
         env.close()
 
 
 def test_a_held_arm_does_not_forget_what_holds_it():
     """With a memory of one step, the point would be gone after the first held step if held
-    steps counted; they do not, so the arm stays held."""
-    assert _step_beside(+1.0, steps=5, memory=1) == 0.0
+    steps counted; they do not, so the arm stays held, and each step says so."""
+    moved, acting = _walk_beside(+1.0, steps=5, memory=1)
+    assert moved == 0.0
+    assert acting == [{"source": "held", "proposed": "policy", "held": True}] * 5
+
+
+def test_the_arm_rule_refuses_and_reports_the_arm_held_where_it_is_on():
+    """A seen point 1.5 cm off the wrist, the push sweeping the wrist towards it: the arm's
+    rule refuses the step and every shorter share, the arm holds still and ``info`` says
+    so; the same scene with the rule switched off by name takes the whole step."""
+    moved, acting = _walk_beside(+1.0)
+    assert moved == 0.0 and acting == [{"source": "held", "proposed": "policy", "held": True}]
+    moved, acting = _walk_beside(+1.0, without=("arm_guard",))
+    assert moved == pytest.approx(0.005, abs=5e-4)
+    assert acting == [{"source": "policy", "proposed": "policy", "held": False}]
 
 
 def test_arm_rule_settings_are_checked():

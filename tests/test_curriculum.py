@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from rayreach.curriculum import (
+from rayreach.learning.curriculum import (
     AugmentedGoalSize,
     GoalSizeParams,
     ObstacleCurriculum,

@@ -12,9 +12,9 @@ import numpy as np
 import pybullet as p
 import pytest
 
-from rayreach.demonstrations import ShelfExpert, SlotExpert, horizontal_reach, top_of
-from rayreach.env import ReachEnv
-from rayreach.policy import read_bundle_meta
+from rayreach.learning.demonstrations import ShelfExpert, SlotExpert, horizontal_reach, top_of
+from rayreach.env.reach import ReachEnv
+from rayreach.learning.bundles import read_bundle_meta
 
 
 def test_expert_levels_and_centres_the_tool_before_advancing():

@@ -1,4 +1,4 @@
-"""The detour a stalled policy is taken on: planned on the rays' hits alone (rayreach.detour)."""
+"""The detour a stalled policy is taken on: planned on the rays' hits alone (rayreach.acting.detour)."""
 
 from __future__ import annotations
 
@@ -8,10 +8,11 @@ import numpy as np
 import pytest
 
 from exp1_scenes import exp1_around_the_tool
-from rayreach.detour import Detour, DetourState
-from rayreach.env import ReachEnv
-from rayreach.policy import FinalApproach, distances_to_segment
-from rayreach.safety import ACTING_SAFETY, SafetyLayer
+from rayreach.acting.detour import Detour, DetourState
+from rayreach.env.reach import ReachEnv
+from rayreach.acting.final_approach import FinalApproach
+from rayreach.sim.geometry import distances_to_segment
+from rayreach.acting.shield import ACTING_SAFETY, SafetyLayer
 
 DOWN = np.array([0.0, 0.0, -1.0])
 LOW, HIGH = np.array([-0.4, -0.3, -0.2]), np.array([0.4, 0.3, 0.35])

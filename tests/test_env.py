@@ -13,10 +13,10 @@ import pytest
 
 import rayreach
 from exp1_scenes import exp1_around_the_tool
-from rayreach.env import OBS_SIZE, ReachEnv
+from rayreach.env.reach import OBS_SIZE, ReachEnv
 from rayreach.scenarios.schema import ObstacleSpec
-from rayreach.sensors import N_RAYS
-from rayreach.transforms import matrix_to_rotvec, matrix_to_rpy, rotvec_to_matrix
+from rayreach.sim.sensors import N_RAYS
+from rayreach.sim.transforms import matrix_to_rotvec, matrix_to_rpy, rotvec_to_matrix
 
 UR5_ID, KR16_ID = "rayreach/Reach-UR5-v0", "rayreach/Reach-KR16-v0"
 
@@ -231,8 +231,8 @@ def _step(env, action):
     obs, reward, terminated, truncated, info = env.step(np.asarray(action, dtype=np.float32))
     terms = info["reward_terms"]
     assert set(terms) == {"success", "collision", "distance", "shaking", "out_of_bounds", "exhausted", "progress",
-                          "proximity", "shielded"}
-    assert terms["progress"] == terms["proximity"] == terms["shielded"] == 0.0  # not in the paper: off unless weighted
+                          "proximity"}
+    assert terms["progress"] == terms["proximity"] == 0.0  # not in the paper: off unless weighted
     assert reward == pytest.approx(sum(terms.values()), abs=1e-12)
     assert terms["distance"] == pytest.approx(
         -0.01 * info["distance"] if not info["goal_reached"] else terms["distance"]

@@ -12,8 +12,9 @@ import pytest
 
 from rayreach.evaluate import EvaluationConfig, evaluate, parse_experiments, write_report
 from rayreach.evaluate import runner
-from rayreach.evaluate.report import box_edges, markdown_table, resample, summarise
-from rayreach.evaluate.store import ResultsStore
+from rayreach.evaluate.executor import Executor
+from rayreach.evaluate.report import markdown_table, summarise
+from rayreach.evaluate.store import SCHEMA, ResultsStore
 from rayreach.planners import make_planner
 from rayreach.planners.base import GlobalPlanner
 
@@ -35,21 +36,35 @@ def test_parse_experiments_accepts_ranges_lists_and_names():
         parse_experiments("9")
 
 
-def test_random_experiment_names_carry_their_obstacle_count():
-    assert runner.random_experiment("kr16") == "random-kr16"
-    assert runner.random_experiment("kr16", 1) == "random-kr16:1"
-    assert runner.parse_random("random-kr16", 3) == ("kr16", 3)
-    assert runner.parse_random("random-kr16:1", 3) == ("kr16", 1)
+def test_random_experiment_names_carry_their_obstacle_count_and_split():
+    assert runner.random_experiment("kr16") == "random-kr16@test"
+    assert runner.random_experiment("kr16", 1, "validation") == "random-kr16:1@validation"
+    assert runner.parse_random("random-kr16@test", 3) == runner.RandomExperiment("kr16", 3, "test")
+    assert runner.parse_random("random-kr16:1@validation", 3) == runner.RandomExperiment("kr16", 1, "validation")
     with pytest.raises(ValueError, match="whole number"):
-        runner.parse_random("random-ur5:-1", 3)
+        runner.parse_random("random-ur5:-1@test", 3)
+    with pytest.raises(ValueError, match="valid: validation, test"):
+        runner.parse_random("random-ur5@train", 3)
+    with pytest.raises(ValueError, match="valid: validation, test"):
+        runner.random_experiment("ur5", split="train")
     with pytest.raises(ValueError, match="known: kr16, ur5"):
-        EvaluationConfig(("random-abb:2",), ("drl",))
+        EvaluationConfig(("random-abb:2@test",), ("drl",))
+
+
+def test_old_random_names_without_a_split_are_the_validation_range():
+    """Databases from before names carried the split drew from seed 1,000,000 on."""
+    assert runner.parse_random("random-kr16", 3) == runner.RandomExperiment("kr16", 3, "validation")
+    assert runner.parse_random("random-kr16:1", 3) == runner.RandomExperiment("kr16", 1, "validation")
+    for run in (0, 7):
+        assert runner.run_seed("random-ur5:2", run) == runner.run_seed("random-ur5:2@validation", run) == 1_000_000 + run
+        assert runner.run_seed("random-ur5@test", run) == 9_000_000 + run
+        assert runner.run_seed("exp1", run) == run
 
 
 def test_a_random_experiment_with_a_count_plays_the_rollout_worlds_of_that_count():
-    """``random-ur5:2`` run r is rollout's world of seed 1,000,000 + r with 2 obstacles,
-    so the two commands measure the same worlds."""
-    from rayreach.env import ReachEnv
+    """``random-ur5:2`` (validation) run r is rollout's world of seed 1,000,000 + r with 2
+    obstacles, so the two commands measure the same worlds."""
+    from rayreach.env.reach import ReachEnv
 
     worker = runner.Worker(EvaluationConfig(("random-ur5:2",), ("drl",), runs=1, workers=1))
     env = ReachEnv(robot="ur5", scenario="random")
@@ -168,35 +183,116 @@ def test_table_means_are_over_successes_and_best_is_bold():
     assert "| experiment | rrt | ncrrt |\n" in random_only  # no empty paper columns
 
 
-def test_resample_is_even_in_arc_length():
-    points = np.array([[0.0, 0, 0], [1.0, 0, 0], [1.0, 3.0, 0]])
-    r = resample(points, 5)
-    np.testing.assert_allclose(r[[0, -1]], points[[0, -1]])
-    np.testing.assert_allclose(np.linalg.norm(np.diff(r, axis=0), axis=1), 1.0)
-
-
-def test_box_edges_follow_pybullets_pose_of_a_rotated_box():
-    """The plotted edges of a box with roll, pitch and yaw end at the corners PyBullet places
-    for the same pose, and each is as long as the box's side along that axis."""
-    import pybullet as pb
-
-    centre, half, rpy = (0.4, -0.1, 0.3), (0.05, 0.1, 0.002), (0.3, -0.2, 1.1)
-    quat = pb.getQuaternionFromEuler(rpy)
-    expected = np.array([pb.multiplyTransforms(centre, quat, (sx * half[0], sy * half[1], sz * half[2]),
-                                               (0, 0, 0, 1))[0]
-                         for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
-    edges = box_edges(centre, half, rpy)
-    assert len(edges) == 12
-    ends = np.unique(np.round([p for edge in edges for p in edge], 9), axis=0)
-    assert len(ends) == 8
-    nearest = np.linalg.norm(ends[:, None] - expected[None], axis=2)  # PyBullet computes in float32
-    assert np.all(nearest.min(axis=1) < 1e-6) and len(set(nearest.argmin(axis=1))) == 8
-    lengths = sorted(round(float(np.linalg.norm(a - b)), 9) for a, b in edges)
-    assert lengths == sorted([2 * h for h in half for _ in range(4)])
-
-
 def test_evaluate_refuses_an_obstacle_count_outside_the_random_suite(tmp_path, capsys):
     from rayreach.cli import main
 
     assert main(["evaluate", "--experiments", "1", "--obstacles", "2", "--out", str(tmp_path)]) == 2
     assert "--suite random" in capsys.readouterr().err
+
+
+class FakeExecutor:
+    """Stands for an Executor in the cache tests: no PyBullet world, counts the open ones."""
+
+    open: set[str] = set()
+    built: list[str] = []
+
+    def __init__(self, scenario, robot=None, config=None) -> None:
+        self.name = str(scenario)
+        self.robot = "ur5"
+        FakeExecutor.built.append(self.name)
+        FakeExecutor.open.add(self.name)
+        assert len(FakeExecutor.open) <= runner.EXECUTORS_KEPT, "a worker held more executors than it keeps"
+
+    def run(self, planner, seed):
+        return runner.crash_record("birrt", self.name, seed, "fake")
+
+    def close(self) -> None:
+        FakeExecutor.open.remove(self.name)
+
+
+@pytest.fixture
+def fake_executors(monkeypatch):
+    FakeExecutor.open, FakeExecutor.built = set(), []
+    monkeypatch.setattr(runner, "Executor", FakeExecutor)
+    monkeypatch.setattr(runner, "make_planner", lambda *a, **k: None)
+    return FakeExecutor
+
+
+def test_a_worker_keeps_the_most_recently_used_executors_and_closes_the_rest(fake_executors):
+    worker = runner.Worker(SMALL, keep=2)
+    for name in ("exp1", "exp2", "exp1", "exp3", "exp1", "exp2"):
+        worker.executor(name)
+    assert fake_executors.built == ["exp1", "exp2", "exp3", "exp2"]  # exp2 was evicted by exp3, exp3 by exp2
+    assert list(worker.executors) == ["exp1", "exp2"] and fake_executors.open == {"exp1", "exp2"}
+    worker.close()
+    assert fake_executors.open == set()
+    with pytest.raises(ValueError, match="at least 1"):
+        runner.Worker(SMALL, keep=0)
+
+
+def test_an_evaluation_over_more_scenes_than_the_cache_closes_executors(fake_executors, tmp_path):
+    scenes = tuple(f"exp{i}" for i in range(1, 8))
+    evaluate(EvaluationConfig(scenes, ("birrt",), runs=2, workers=1), tmp_path, progress=False)
+    assert fake_executors.built == list(scenes) and fake_executors.open == set()
+    assert len(_stored(tmp_path / "results.db")) == 14
+
+
+def test_sampling_planners_run_on_random_worlds_of_the_test_split():
+    with Executor("random", robot="ur5") as ex:
+        for name in ("birrt", "ncrrt"):
+            record = ex.run(make_planner(name, "ur5", time_limit=2.0), runner.run_seed("random-ur5@test", 0))
+            assert record.seed == 9_000_000 and record.outcome != "crash" and record.acting_share == {}
+
+
+def test_evaluate_random_stores_the_split_in_the_name_and_takes_any_planner(tmp_path):
+    from rayreach.cli import main
+
+    assert main(["evaluate", "--suite", "random", "--robot", "ur5", "--episodes", "1", "--planners", "birrt",
+                 "--workers", "1", "--time-limit", "2", "--out", str(tmp_path)]) == 0
+    assert [row[:4] for row in _stored(tmp_path / "results.db")] == [("random-ur5@test", "birrt", 0, 9_000_000)]
+
+
+@pytest.mark.parametrize("argv, experiments, planners", [
+    ([], ("random-ur5@test",), ("drl", "drl-alone")),
+    (["--split", "validation", "--obstacles", "2"], ("random-ur5:2@validation",), ("drl", "drl-alone")),
+    (["--planners", "drl,drl-alone,rrt"], ("random-ur5@test",), ("drl", "drl-alone", "rrt")),
+])
+def test_evaluate_random_defaults_to_the_test_split_and_the_policy_with_and_without_its_layers(
+        tmp_path, monkeypatch, argv, experiments, planners):
+    import rayreach.evaluate as evaluate_package
+    from rayreach.cli import main
+
+    seen = []
+    monkeypatch.setattr(evaluate_package, "evaluate", lambda config, out: seen.append(config))
+    main(["evaluate", "--suite", "random", "--robot", "ur5", "--episodes", "1", "--out", str(tmp_path), *argv])
+    assert seen[0].experiments == experiments and seen[0].planners == planners
+
+
+def test_evaluate_refuses_a_split_outside_the_random_suite(tmp_path, capsys):
+    from rayreach.cli import main
+
+    assert main(["evaluate", "--experiments", "1", "--split", "test", "--out", str(tmp_path)]) == 2
+    assert "--split applies to --suite random" in capsys.readouterr().err
+
+
+OLD_RUNS = SCHEMA.replace("    acting_share TEXT,\n", "")
+
+
+def test_an_old_database_without_acting_shares_opens_and_is_migrated(tmp_path):
+    path = tmp_path / "results.db"
+    assert "acting_share" not in OLD_RUNS
+    with sqlite3.connect(path) as db:
+        db.executescript(OLD_RUNS)
+        db.execute("INSERT INTO experiments (name, robot, goal_tolerance) VALUES ('random-ur5', 'ur5', 0.01)")
+        db.execute("INSERT INTO plannerConfigs (name, settings) VALUES ('drl', '{}')")
+        db.execute("INSERT INTO runs (experimentid, plannerid, planner, run, seed, status, plan_status, solved, "
+                   "collision, time, motion_time, execution_time, steps, replans, versions) "
+                   "VALUES (1, 1, 'drl', 0, 1000000, 'success', 'solved', 1, 0, 0.1, 1.0, 1.1, 50, 0, '{}')")
+    store = ResultsStore(path)
+    record = runner.crash_record("drl", "random", 1_000_001, "")
+    record.acting_share = {"policy": 0.75, "final_approach": 0.25}
+    store.add("random-ur5", "ur5", 0.01, 1, record, {}, None)
+    rows = store.rows()
+    store.close()
+    assert [r["acting_share"] for r in rows] == [{}, {"policy": 0.75, "final_approach": 0.25}]
+    ResultsStore(path).close()  # a second opening finds the column there

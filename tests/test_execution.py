@@ -8,7 +8,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from rayreach.execution import ExecutionConfig, Executor, time_path
+from rayreach.evaluate.executor import ExecutionConfig, Executor, time_path
 from rayreach.planners import ReactivePlanner, Status, make_planner
 from rayreach.scenarios import get_scenario
 from rayreach.scenarios.schema import ObstacleSpec
@@ -114,7 +114,7 @@ class StraightToGoal(ReactivePlanner):
     def reset(self, seed: int) -> None:
         self.seeds.append(seed)
 
-    def act(self, observation: np.ndarray) -> np.ndarray:
+    def act(self, observation: np.ndarray, info: dict) -> np.ndarray:
         offset = observation[6:9]
         return np.concatenate((np.clip(offset / 0.005, -1, 1), np.zeros(3))).astype(np.float32)
 

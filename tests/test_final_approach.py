@@ -1,5 +1,6 @@
-"""The final approach: its path test on its own, the env's ray hit points against PyBullet's
-ray casts, and the straight step in a scene (PyBullet's contacts), for acting and training."""
+"""The final approach: its path test on its own, the perception's ray hit points against
+PyBullet's ray casts, and the straight step in a scene acting through ``ActingEnv``
+(PyBullet's contacts), for acting and training."""
 
 from __future__ import annotations
 
@@ -9,14 +10,17 @@ import numpy as np
 import pybullet as p
 import pytest
 
-from exp1_scenes import exp1_around_the_tool
-from rayreach.env import N_ROBOT_OBS, ReachEnv
-from rayreach.policy import FinalApproach, distances_to_parallelogram, distances_to_segment
+from exp1_scenes import acting_around_the_tool, exp1_around_the_tool, layers
+from rayreach.acting import SOURCES, ActingConfig, ActingEnv
+from rayreach.acting.config import ROBOT_RADII
+from rayreach.acting.final_approach import FinalApproach
+from rayreach.acting.shield import ACTING_SAFETY
+from rayreach.env.reach import N_ROBOT_OBS, ReachEnv
+from rayreach.learning.train import TrainConfig, make_env_fn, set_trainable
 from rayreach.robots import get_robot
-from rayreach.safety import ACTING_SAFETY
 from rayreach.scenarios.schema import ObstacleSpec
-from rayreach.transforms import rotvec_to_matrix
-from rayreach.train import TrainConfig, make_env_fn, set_trainable
+from rayreach.sim.geometry import distances_to_parallelogram, distances_to_segment
+from rayreach.sim.transforms import rotvec_to_matrix
 
 APPROACH = FinalApproach(radius=0.1, margin=0.02, ee_step=0.005)
 NOTHING = np.zeros((0, 3))
@@ -139,8 +143,13 @@ def test_ray_hits_lie_where_pybullet_casts_them():
     env = exp1_around_the_tool([_wall_beside], np.array([0.08, 0.0, 0.0]))
     try:
         env.reset(seed=0)
-        hits = env.ray_hits()
+        seen = env.perceive()
+        hits = seen.hits
+        np.testing.assert_allclose(seen.hit_points - seen.ee_position, hits)
+        np.testing.assert_array_equal(seen.ee_position, env.ee_pos)
         origins, directions = env.rays.world_rays(env.frames)
+        np.testing.assert_allclose(seen.origins, origins)
+        np.testing.assert_allclose(seen.directions, directions)
         results = p.rayTestBatch(origins.tolist(), (origins + env.config.ray_range * directions).tolist(),
                                  physicsClientId=env.scene.client)
         seen = [r[3] for r in results if r[0] >= 0 and r[0] != env.scene.robot]  # the rays never see the arm
@@ -152,27 +161,65 @@ def test_ray_hits_lie_where_pybullet_casts_them():
 
 
 def _idle(env, steps=40):
-    """Steps with a zero action (a policy that stopped); the last info."""
+    """Steps with a zero action (a policy that stopped); the last info, with every step's
+    ``info["acting"]["source"]`` under ``"sources"`` where the env acts through the layers."""
     env.reset(seed=0)
+    sources = []
     for _ in range(steps):
         _, _, terminated, _, info = env.step(np.zeros(6, np.float32))
+        sources.append(info.get("acting", {}).get("source"))
         if terminated:
             break
-    return info
+    return {**info, "sources": sources}
+
+
+IDLE = {"policy", "held"}
+"""What an idle policy's steps may report: its own zero step, which holds the arm still."""
+
+
+def _approach(obstacles, goal_offset, approach: FinalApproach | None = FinalApproach(), **options) -> ActingEnv:
+    """exp1 round the tool acting through ``approach`` (and ``options``' other layers) alone."""
+    return acting_around_the_tool(obstacles, layers(final_approach=approach, **options), goal_offset)
 
 
 def test_env_steps_past_a_wall_beside_the_goal_and_stops_at_one_across_the_path():
-    env = exp1_around_the_tool([_wall_beside], np.array([0.08, 0.0, 0.0]), final_approach=FinalApproach())
+    env = _approach([_wall_beside], np.array([0.08, 0.0, 0.0]))
     try:
         info = _idle(env)
-        assert info["is_success"] and not info["collision"] and env.steps <= 17
+        assert info["is_success"] and not info["collision"] and env.unwrapped.steps <= 17
+        assert set(info["sources"]) == {"final_approach"}  # the idle policy never moved the tool
     finally:
         env.close()
     for approach in (None, FinalApproach()):  # without it, or with the way blocked, the tool stays put
-        env = exp1_around_the_tool([_wall_across], np.array([0.08, 0.0, 0.0]), final_approach=approach)
+        env = _approach([_wall_across], np.array([0.08, 0.0, 0.0]), approach)
         try:
             info = _idle(env)
             assert not info["is_success"] and not info["collision"] and info["distance"] == pytest.approx(0.08, abs=1e-3)
+            assert "final_approach" not in info["sources"]
+        finally:
+            env.close()
+
+
+def test_the_final_approach_takes_over_only_while_it_is_on():
+    """The goal beside the wall, the policy pushing away from it (-x): through the final
+    approach the steps are the final approach's, to the goal; with it off by name the push
+    is the policy's and the tool leaves the goal behind."""
+    for config, reached in ((ActingConfig().without("detour", "resample"), True),
+                            (ActingConfig().without("final_approach", "detour", "resample"), False)):
+        env = acting_around_the_tool([_wall_beside], config, np.array([0.08, 0.0, 0.0]))
+        try:
+            env.reset(seed=0)
+            sources = []
+            for _ in range(20):
+                _, _, terminated, _, info = env.step(np.array([-1, 0, 0, 0, 0, 0], np.float32))
+                sources.append(info["acting"]["source"])
+                assert info["acting"]["source"] in SOURCES and not info["collision"]
+                if terminated:
+                    break
+            assert info["is_success"] == reached
+            assert set(sources) == ({"final_approach"} if reached else {"policy"})
+            if not reached:
+                assert info["distance"] == pytest.approx(0.08 + 20 * 0.005, abs=2e-3)
         finally:
             env.close()
 
@@ -184,19 +231,19 @@ def _wall_past_the_goal(ee):  # an upright plate across the path 6.5 cm ahead: 3
 def test_the_shield_lets_the_straight_step_reach_a_goal_nearer_than_anything_seen():
     """The wall is inside the 5 cm shield from the start, so the shield alone holds the tool
     3 cm short; the goal is nearer than the wall, so the straight step reaches it."""
-    env = exp1_around_the_tool([_wall_past_the_goal], np.array([0.03, 0.0, 0.0]), safety=ACTING_SAFETY)
+    env = _approach([_wall_past_the_goal], np.array([0.03, 0.0, 0.0]), None, safety=ACTING_SAFETY)
     try:
         obs, _ = env.reset(seed=0)
-        assert obs[N_ROBOT_OBS:].min() * env.config.ray_range < ACTING_SAFETY.ray_shield
+        assert obs[N_ROBOT_OBS:].min() * env.unwrapped.config.ray_range < ACTING_SAFETY.ray_shield
         info = _idle(env)
         assert not info["collision"] and info["distance"] == pytest.approx(0.03, abs=1e-3)
     finally:
         env.close()
-    env = exp1_around_the_tool([_wall_past_the_goal], np.array([0.03, 0.0, 0.0]), safety=ACTING_SAFETY,
-                               final_approach=FinalApproach())
+    env = _approach([_wall_past_the_goal], np.array([0.03, 0.0, 0.0]), safety=ACTING_SAFETY)
     try:
         info = _idle(env)
-        assert info["is_success"] and not info["collision"] and env.steps <= 7
+        assert info["is_success"] and not info["collision"] and env.unwrapped.steps <= 7
+        assert set(info["sources"]) == {"final_approach"}
     finally:
         env.close()
 
@@ -216,24 +263,30 @@ def test_env_steps_towards_the_goal_after_a_stall_and_not_before():
     100 steps without progress the env nudges the tool towards the goal, inside the radius,
     and the final approach finishes; without the stall rule it stands still to the end."""
     for stall_steps, reached in ((0, False), (100, True)):
-        env = exp1_around_the_tool([], np.array([0.107, 0.0, 0.0]), final_approach=FinalApproach(stall_steps=stall_steps))
+        env = _approach([], np.array([0.107, 0.0, 0.0]), FinalApproach(stall_steps=stall_steps))
         try:
             info = _idle(env, steps=150)
             assert info["is_success"] == reached and not info["collision"]
             if reached:
-                assert 100 < env.steps <= 100 + 22  # 10.7 cm of 5 mm steps
+                assert 100 < env.unwrapped.steps <= 100 + 22  # 10.7 cm of 5 mm steps
+                # the idle policy's zero step leaves the arm still: held, and the policy's
+                assert set(info["sources"][:100]) <= IDLE and "stall" in info["sources"][100:]
+                assert info["sources"][-1] == "final_approach"
             else:
                 assert info["distance"] == pytest.approx(0.107, abs=1e-3)
+                assert set(info["sources"]) <= IDLE
         finally:
             env.close()
 
 
 def test_the_stall_window_starts_again_at_each_goal():
-    env = ReachEnv(robot="ur5", scenario="exp2", goal_tolerance=0.3, final_approach=FinalApproach(stall_steps=2))
+    env = ActingEnv(ReachEnv(robot="ur5", scenario="exp2", goal_tolerance=0.3),
+                    layers(final_approach=FinalApproach(stall_steps=2)))
     try:
-        env.reset(seed=0)
+        _, start = env.reset(seed=0)
+        assert env._episode.distances == [start["distance"]]
         _, _, _, _, info = env.step(np.zeros(6, np.float32))
-        assert info["goal_index"] == 1 and env._distances == [info["distance"]]
+        assert info["goal_index"] == 1 and env._episode.distances == [info["distance"]]
     finally:
         env.close()
 
@@ -267,12 +320,17 @@ def test_the_axial_radius_needs_the_tools_direction_and_still_tests_the_path():
 
 def test_the_env_fills_in_the_robots_radius_unless_one_is_given():
     for robot, radius, axial in (("ur5", 0.1, 0.13), ("kr16", 0.2, None)):
-        env = ReachEnv(robot=robot, scenario="random", final_approach=FinalApproach())
+        spec = get_robot(robot)
+        env = ActingEnv(ReachEnv(robot=robot, scenario="random"), layers(final_approach=FinalApproach()))
         try:
-            assert env.final_approach.radius == get_robot(robot).final_approach_radius == radius
-            assert env.final_approach.axial_radius == get_robot(robot).final_approach_axial_radius == axial
-            env.set_final_approach(FinalApproach(radius=0.15, axial_radius=0.2))
-            assert env.final_approach.radius == 0.15 and env.final_approach.axial_radius == 0.2
+            applied = env.final_approach
+            assert applied.radius == ROBOT_RADII[robot].radius == radius
+            assert applied.axial_radius == ROBOT_RADII[robot].axial_radius == axial
+            assert (applied.ee_step, applied.rot_step) == (spec.ee_step, spec.rot_step)
+            assert (applied.tool_length, applied.tool_radius) == (spec.tool.length, spec.tool.radius)
+            given = ActingEnv(env.env, layers(final_approach=FinalApproach(radius=0.15, axial_radius=0.2)))
+            assert given.final_approach.radius == 0.15 and given.final_approach.axial_radius == 0.2
+            assert ActingEnv(env.env, layers()).final_approach is None
         finally:
             env.close()
     with pytest.raises(ValueError, match="radius"):
@@ -281,7 +339,7 @@ def test_the_env_fills_in_the_robots_radius_unless_one_is_given():
 
 def test_env_steps_straight_from_farther_with_a_larger_radius():
     for radius, reached in ((None, False), (0.15, True)):  # the UR5's own radius is 0.1 m
-        env = exp1_around_the_tool([], np.array([0.13, 0.0, 0.0]), final_approach=FinalApproach(radius))
+        env = _approach([], np.array([0.13, 0.0, 0.0]), FinalApproach(radius))
         try:
             info = _idle(env)
             assert info["is_success"] == reached and not info["collision"]
@@ -305,8 +363,7 @@ def test_env_keeps_the_tool_body_off_a_plate_the_tips_path_passes_under():
         assert info["collision"]
     finally:
         env.close()
-    env = exp1_around_the_tool([_cover_over_the_path], np.array([0.08, 0.0, 0.0]),
-                               final_approach=FinalApproach(turn=False))
+    env = _approach([_cover_over_the_path], np.array([0.08, 0.0, 0.0]), FinalApproach(turn=False))
     try:
         info = _idle(env)
         assert not info["collision"] and info["distance"] == pytest.approx(0.08, abs=1e-3)
@@ -318,11 +375,11 @@ def test_env_turns_the_tool_under_a_plate_its_back_would_strike_and_reaches_the_
     """The plate of the test above: turned about its tip towards the path (through the
     shield, which keeps the final approach's turn), the tool slides in under the plate;
     PyBullet finds no contact on the way."""
-    env = exp1_around_the_tool([_cover_over_the_path], np.array([0.08, 0.0, 0.0]), final_approach=FinalApproach())
+    env = _approach([_cover_over_the_path], np.array([0.08, 0.0, 0.0]))
     try:
         info = _idle(env, steps=400)
         assert info["is_success"] and not info["collision"]
-        assert env.ee_rot[0, 2] > 0.5  # the tool leans towards the goal
+        assert env.unwrapped.ee_rot[0, 2] > 0.5  # the tool leans towards the goal
     finally:
         env.close()
 
@@ -338,13 +395,60 @@ def test_env_tool_axis_is_where_pybullet_has_the_tool():
         env.close()
 
 
+def _acting_env(env) -> ActingEnv | None:
+    """The ``ActingEnv`` in ``env``'s chain of wrappers, if any."""
+    while not isinstance(env, ActingEnv):
+        if not hasattr(env, "env"):
+            return None
+        env = env.env
+    return env
+
+
 def test_training_envs_act_with_the_layers_only_when_asked():
+    """With ``acting_layers`` the training env acts through ``ActingConfig.training()``: the
+    shield, workspace guard and arm's rule of the shipped stack; the layers that replace the
+    policy's action (final approach, detour, slide) stay out."""
     for acting in (False, True):
-        env = make_env_fn(TrainConfig(robot="ur5", acting_layers=acting, shield_weight=-0.1), 0)().unwrapped
+        monitored = make_env_fn(TrainConfig(robot="ur5", acting_layers=acting, shield_weight=-0.1), 0)()
         try:
-            assert (env.config.final_approach is not None) == acting
-            assert env.config.safety.active == acting
-            assert env.config.rewards.shielded == -0.1
+            wrapper = _acting_env(monitored)
+            assert (wrapper is not None) == acting
+            assert monitored.unwrapped.config.rewards.shielded == -0.1
+            if acting:
+                assert wrapper.config == ActingConfig.training()
+                assert wrapper.final_approach is None and wrapper.config.detour is None
+                assert wrapper.config.safety.active and wrapper.config.safety.slide == 0.0
+                assert wrapper.config.layers == ("ray_shield", "workspace_guard", "arm_guard")
+        finally:
+            monitored.close()
+
+
+def _box_behind(ee):  # its +x face 9 cm to the -x of the tool point
+    return ObstacleSpec("box", (ee[0] - 0.14, ee[1], ee[2]), half_extents=(0.05, 0.15, 0.15))
+
+
+@pytest.mark.parametrize("scene, goal_offset, push, replaced_by", [
+    ([_wall_beside], (0.08, 0.0, 0.0), (0.0, 0.0, 0.0), "final_approach"),  # an idle policy beside the goal
+    ([_box_behind], (0.0, 0.15, 0.0), (-1.0, 0.0, 0.0), "slide"),  # a push held at a box, the goal aside
+])
+def test_training_layers_never_replace_the_policys_action(scene, goal_offset, push, replaced_by):
+    """Where the shipped stack's final approach takes over and where its slide does,
+    ``ActingConfig.training()`` leaves every step the policy's, or held."""
+    action = np.r_[push, 0.0, 0.0, 0.0].astype(np.float32)
+    for config, kept in ((ActingConfig().without("resample"), False), (ActingConfig.training(), True)):
+        env = acting_around_the_tool(scene, config, np.array(goal_offset))
+        try:
+            env.reset(seed=0)
+            sources = set()
+            for _ in range(60):
+                _, _, terminated, truncated, info = env.step(action)
+                sources.add(info["acting"]["source"])
+                if terminated or truncated:
+                    break
+            assert not info["collision"]
+            assert sources <= set(SOURCES)
+            assert (sources <= {"policy", "held"}) == kept, sources
+            assert (replaced_by in sources) == (not kept), sources
         finally:
             env.close()
 
@@ -355,7 +459,7 @@ def test_set_trainable_moves_only_what_it_frees(actor, features):
     PPO update changes exactly the parameters left trainable."""
     from stable_baselines3 import PPO
 
-    from rayreach.train import build_model, build_vec_env
+    from rayreach.learning.train import build_model, build_vec_env
 
     config = TrainConfig(robot="ur5", envs=1, workers=1, n_steps=64, batch_size=32, n_epochs=1)
     venv = build_vec_env(config)
@@ -384,27 +488,30 @@ def test_a_straight_step_lets_the_orientation_go_when_ik_cannot_keep_it(policy_s
     alone; the policy's own steps get no such fallback, and the unconverged 6-D result
     (here, the unchanged configuration) is all they get."""
     goal = np.array([0.03, 0.0, 0.0])
-    env = exp1_around_the_tool([], goal, final_approach=None if policy_step else FinalApproach())
+    env = _approach([], goal, None if policy_step else FinalApproach())
+    reach = env.unwrapped
     try:
         env.reset(seed=0)
-        real_ik = env.kin.ik
+        real_ik = reach.kin.ik
         asked = []
 
         def pose_out_of_reach(target_pos, target_rot, q, params, start_frames=None):
             asked.append(target_rot is None)
             if target_rot is None:
                 return real_ik(target_pos, None, q, params, start_frames=start_frames)
-            stuck = real_ik(env.ee_pos, env.ee_rot, q, params, start_frames=start_frames)
+            stuck = real_ik(reach.ee_pos, reach.ee_rot, q, params, start_frames=start_frames)
             return dataclasses.replace(stuck, converged=False)
 
-        monkeypatch.setattr(env.kin, "ik", pose_out_of_reach)
-        start = env.ee_pos.copy()
-        env.step(np.array([1, 0, 0, 0, 0, 0], np.float32))
+        monkeypatch.setattr(reach.kin, "ik", pose_out_of_reach)
+        start = reach.ee_pos.copy()
+        _, _, _, _, info = env.step(np.array([1, 0, 0, 0, 0, 0], np.float32))
         if policy_step:
-            assert asked == [False] and np.linalg.norm(env.ee_pos - start) < 1e-4
+            assert asked == [False] and np.linalg.norm(reach.ee_pos - start) < 1e-4
+            assert info["acting"]["proposed"] == "policy"
         else:
             assert asked == [False, True]
-            assert env.ee_pos[0] - start[0] == pytest.approx(0.005, abs=2e-4)  # a full step along x
+            assert reach.ee_pos[0] - start[0] == pytest.approx(0.005, abs=2e-4)  # a full step along x
+            assert info["acting"]["source"] == "final_approach"
     finally:
         env.close()
 

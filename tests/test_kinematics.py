@@ -9,9 +9,9 @@ import numpy as np
 import pybullet as p
 import pytest
 
-from rayreach.kinematics import IKParams, Kinematics
-from rayreach.scene import Scene
-from rayreach.transforms import matrix_to_rotvec, quaternion_to_matrix, rpy_to_matrix
+from rayreach.sim.kinematics import IKParams, Kinematics
+from rayreach.sim.scene import Scene
+from rayreach.sim.transforms import matrix_to_rotvec, quaternion_to_matrix, rpy_to_matrix
 
 # PyBullet accumulates link poses in single precision: its quaternions are off unit length by
 # up to ~3e-7, so they are normalised before comparison (errors seen: ~1.3e-7 m, ~7e-7 rad).
@@ -310,7 +310,7 @@ def test_ik_iteration_is_algorithm_1_update(scale):
     """One iteration equals q + dint * J^T (J J^T + lambda^2 I)^-1 (x_d - x_c) / ddif, with the
     paper's constant lambda (scale None) or lambda^2 * ||x_e|| / scale below the scale."""
     from rayreach.robots import get_robot
-    from rayreach.transforms import matrix_to_rotvec
+    from rayreach.sim.transforms import matrix_to_rotvec
 
     kin = Kinematics(get_robot("kr16"))
     q = np.asarray(kin.spec.home)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from rayreach.env import ReachEnv
+from rayreach.env.reach import ReachEnv
 from rayreach.planners import make_planner
 from rayreach.planners.collision import CollisionChecker
 from rayreach.planners.ncrrt import NCRRTConfig, ncrrt

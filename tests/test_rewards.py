@@ -8,7 +8,7 @@ from collections import deque
 import numpy as np
 import pytest
 
-from rayreach import rewards as R
+from rayreach.env import rewards as R
 
 
 def test_default_weights_are_the_papers():
@@ -190,7 +190,7 @@ def test_shake_counter_reset():
 
 
 def test_progress_term_is_off_by_default_and_rewards_getting_closer():
-    from rayreach.rewards import RewardWeights, progress_reward
+    from rayreach.env.rewards import RewardWeights, progress_reward
 
     assert progress_reward(0.30, 0.25) == 0.0
     w = RewardWeights(progress=10.0)
@@ -199,7 +199,7 @@ def test_progress_term_is_off_by_default_and_rewards_getting_closer():
 
 
 def test_proximity_term_is_off_by_default_and_grows_towards_contact():
-    from rayreach.rewards import RewardWeights, proximity_reward
+    from rayreach.env.rewards import RewardWeights, proximity_reward
 
     assert proximity_reward(0.0) == 0.0
     w = RewardWeights(proximity=-0.1, proximity_range=0.25)

@@ -1,4 +1,5 @@
-"""The safety layer: each rule on its own, then in the env against PyBullet's contacts."""
+"""The safety layer: each rule on its own, the shield's memory (``remembered_rays``) over
+constructed scans, then acting through ``ActingEnv`` against PyBullet's contacts."""
 
 from __future__ import annotations
 
@@ -7,10 +8,14 @@ import dataclasses
 import numpy as np
 import pytest
 
-from exp1_scenes import exp1_around_the_tool
-from rayreach.env import ReachEnv
-from rayreach.rewards import RewardWeights
-from rayreach.safety import ACTING_SAFETY, HitMemory, SafetyLayer, nearest_direction_in_cone, nearest_in_cone
+from exp1_scenes import acting_around_the_tool, layers
+from rayreach.acting import ActingConfig, ActingEnv
+from rayreach.acting.memory import RayMemory
+from rayreach.acting.shield import (ACTING_SAFETY, LOST, MARGIN, SafetyLayer, nearest_direction_in_cone,
+                                    nearest_in_cone, remembered_rays)
+from rayreach.env.perception import Perception
+from rayreach.env.reach import ReachEnv
+from rayreach.env.rewards import RewardWeights
 from rayreach.scenarios.schema import ObstacleSpec
 
 FAR = np.full(3, 0.4)
@@ -162,48 +167,71 @@ def test_negative_settings_are_refused():
         SafetyLayer(slide=1.5)
 
 
-def test_hit_memory_gives_back_what_a_ray_saw_from_where_its_origin_is_now():
+RANGE = 0.4
+
+
+def _scan(ee, origins, directions, lengths) -> Perception:
+    """A constructed perception: rays (world) from ``origins`` along ``directions``, seeing
+    ``lengths`` m (``RANGE``: nothing), with the end effector at ``ee``."""
+    lengths = np.asarray(lengths, dtype=float)
+    return Perception(step=0, q=np.zeros(6), ee_position=np.asarray(ee, dtype=float), ee_rotation=np.eye(3),
+                      goal=np.zeros(3), origins=np.asarray(origins, dtype=float),
+                      directions=np.asarray(directions, dtype=float), lengths=lengths, fractions=lengths / RANGE,
+                      workspace_low=LOW, workspace_high=HIGH)
+
+
+def _seen_from(memory: RayMemory, steps: int, ee, origins, directions, lengths, reach: float = 0.05):
+    """Add the scan to ``memory`` and read the shield's rays from it, remembering ``steps`` scans."""
+    memory.add(_scan(ee, origins, directions, lengths), moved=True)
+    return remembered_rays(memory.now, memory.before(steps), reach)
+
+
+def test_remembered_rays_give_back_what_a_ray_saw_from_where_its_origin_is_now():
     """A ray from 2 cm beside the tool point saw a point 3 cm ahead of it; the tool then moved
     1 cm and the ray sees nothing. The memory returns the point as a ray from the origin's
     new place: 4 cm long here, as plain geometry says."""
-    memory = HitMemory(steps=2)
+    memory = RayMemory()
     origin, direction = np.array([[0.02, 0.0, 0.0]]), np.array([[1.0, 0.0, 0.0]])
-    far = np.array([0.4])
-    distances, directions = memory.rays(np.zeros(3), origin, direction, np.array([0.03]), reach=0.05)
+    far = np.array([RANGE])
+    distances, directions = _seen_from(memory, 2, np.zeros(3), origin, direction, [0.03])
     assert distances.tolist() == [0.03]  # nothing remembered yet
     moved = np.array([-0.01, 0.0, 0.0])
-    distances, directions = memory.rays(moved, origin + moved, direction, far, reach=0.05)
+    distances, directions = _seen_from(memory, 2, moved, origin + moved, direction, far)
     np.testing.assert_allclose(distances, [0.4, 0.04])
     np.testing.assert_allclose(directions, [[1, 0, 0], [1, 0, 0]])
     sideways = np.array([0.0, 0.03, 0.0])  # the point is now sqrt(0.03^2 + 0.03^2) from the origin
-    distances, directions = memory.rays(sideways, origin + sideways, direction, far, reach=0.05)
+    distances, directions = _seen_from(memory, 2, sideways, origin + sideways, direction, far)
     np.testing.assert_allclose(distances, [0.4, np.hypot(0.03, 0.03)])
     np.testing.assert_allclose(directions[1], np.array([1.0, -1.0, 0.0]) / np.sqrt(2))
-    distances, _ = memory.rays(sideways, origin + sideways, direction, far, reach=0.05)
+    distances, _ = _seen_from(memory, 2, sideways, origin + sideways, direction, far)
     assert distances.tolist() == [0.4]  # two steps on, forgotten
-    assert HitMemory(steps=0).rays(np.zeros(3), origin, direction, np.array([0.03]), 0.05)[0].tolist() == [0.03]
+    first = RayMemory()
+    first.add(_scan(np.zeros(3), origin, direction, [0.03]), moved=True)
+    first.add(_scan(moved, origin + moved, direction, far), moved=True)
+    assert first.before(0) == []  # no memory: the current rays alone
+    assert remembered_rays(first.now, first.before(0), 0.05)[0].tolist() == [0.4]
 
 
-def test_hit_memory_keeps_only_hits_a_step_could_bring_within_the_shield():
-    memory = HitMemory(steps=5)
+def test_remembered_rays_keep_only_hits_a_step_could_bring_within_the_shield():
+    memory = RayMemory()
     origins, directions = np.zeros((2, 3)), np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
-    memory.rays(np.zeros(3), origins, directions, np.array([0.05 + HitMemory.MARGIN - 1e-4, 0.2]), reach=0.05)
-    closer = np.array([HitMemory.MARGIN, 0.0, 0.0])  # the first point is now just inside 5 cm
-    distances, _ = memory.rays(closer, origins + closer, directions, np.full(2, 0.4), reach=0.05)
+    _seen_from(memory, 5, np.zeros(3), origins, directions, [0.05 + MARGIN - 1e-4, 0.2])
+    closer = np.array([MARGIN, 0.0, 0.0])  # the first point is now just inside 5 cm
+    distances, _ = _seen_from(memory, 5, closer, origins + closer, directions, np.full(2, RANGE))
     assert len(distances) == 3 and distances[2] == pytest.approx(0.05 - 1e-4)
 
 
-def test_hit_memory_leaves_what_the_rays_still_see_to_them():
+def test_remembered_rays_leave_what_the_rays_still_see_to_them():
     """The same point seen again (within ``LOST``) is the current rays' to hold off; only a
     point no ray hits any more comes back from the memory."""
-    memory = HitMemory(steps=3)
+    memory = RayMemory()
     origin, direction = np.zeros((1, 3)), np.array([[1.0, 0.0, 0.0]])
-    memory.rays(np.zeros(3), origin, direction, np.array([0.03]), reach=0.05)
-    step = np.array([0.0, HitMemory.LOST / 2, 0.0])  # the ray now hits the face half LOST aside
-    distances, _ = memory.rays(step, origin + step, direction, np.array([0.03]), reach=0.05)
+    _seen_from(memory, 3, np.zeros(3), origin, direction, [0.03])
+    step = np.array([0.0, LOST / 2, 0.0])  # the ray now hits the face half LOST aside
+    distances, _ = _seen_from(memory, 3, step, origin + step, direction, [0.03])
     assert distances.tolist() == [0.03]
     gone = 3 * step  # the ray passed the face's edge: both remembered points are out of sight
-    distances, _ = memory.rays(gone, origin + gone, direction, np.array([0.4]), reach=0.05)
+    distances, _ = _seen_from(memory, 3, gone, origin + gone, direction, [RANGE])
     np.testing.assert_allclose(distances, [0.4, np.hypot(0.03, 3 * step[1]), np.hypot(0.03, 2 * step[1])])
 
 
@@ -226,24 +254,28 @@ def test_an_unconverged_ik_step_towards_what_the_rays_see_is_not_taken(converged
     """The layer lets a sideways step through; IK, failing to converge, would put the tool
     2 mm nearer the box the rays see 3 cm away. The arm holds still instead. A result IK
     reports as converged is taken as it comes: it is the step asked for, within IK's 0.1 mm."""
-    env = exp1_around_the_tool([_near_box], safety=ACTING_SAFETY)
+    env = acting_around_the_tool([_near_box], layers(safety=ACTING_SAFETY))
+    reach = env.unwrapped
     try:
         env.reset(seed=0)
-        real_ik = env.kin.ik
+        real_ik = reach.kin.ik
 
         def drifting_ik(target_pos, target_rot, q, params, start_frames=None):
             drifted = real_ik(np.asarray(target_pos) + np.array([-0.002, 0.0, 0.0]), target_rot, q, params,
                               start_frames=start_frames)
             return dataclasses.replace(drifted, converged=converged)
 
-        monkeypatch.setattr(env.kin, "ik", drifting_ik)
-        before, q = env.ee_pos.copy(), env.q.copy()
-        env.step(np.array([0, 1, 0, 0, 0, 0], np.float32))
+        monkeypatch.setattr(reach.kin, "ik", drifting_ik)
+        before, q = reach.ee_pos.copy(), reach.q.copy()
+        _, _, _, _, info = env.step(np.array([0, 1, 0, 0, 0, 0], np.float32))
+        assert info["acting"]["held"] == (not converged) and info["acting"]["proposed"] == "policy"
         if converged:
-            assert env.ee_pos[0] < before[0] - 0.0015 and env.ee_pos[1] > before[1] + 0.004
+            assert reach.ee_pos[0] < before[0] - 0.0015 and reach.ee_pos[1] > before[1] + 0.004
+            assert info["acting"]["source"] == "policy"
         else:
-            np.testing.assert_array_equal(env.q, q)
-            np.testing.assert_array_equal(env.ee_pos, before)
+            np.testing.assert_array_equal(reach.q, q)
+            np.testing.assert_array_equal(reach.ee_pos, before)
+            assert info["acting"]["source"] == "held"
     finally:
         env.close()
 
@@ -259,19 +291,25 @@ def _box_behind(ee):  # its +x face 9 cm to the -x of the tool point
     return ObstacleSpec("box", (ee[0] - 0.14, ee[1], ee[2]), half_extents=(0.05, 0.15, 0.15))
 
 
-def _push_into_a_box(safety: SafetyLayer, steps: int = 60, **env_options):
+def _push_into_a_box(safety: SafetyLayer | ActingConfig, steps: int = 60, **env_options):
     """The UR5 at exp1's start, a box face 9 cm to the -x of the tool point, the action pushing
-    -x; the step count and the last step's info, with the start and the shielded terms of all steps."""
-    env = exp1_around_the_tool([_box_behind], safety=safety, **env_options)
-    shielded = []
+    -x, acting through ``safety`` alone (or the layers of an ``ActingConfig``); the step count
+    and the last step's info, with the start and, for all steps, the shielded terms,
+    ``info["acting"]`` and the end-effector positions."""
+    config = safety if isinstance(safety, ActingConfig) else layers(safety=safety)
+    env = acting_around_the_tool([_box_behind], config, **env_options)
+    shielded, acting, path = [], [], []
     try:
         _, start = env.reset(seed=0)
         for k in range(steps):
             _, _, terminated, _, info = env.step(np.array([-1, 0, 0, 0, 0, 0], np.float32))
             shielded.append(info["reward_terms"]["shielded"])
+            acting.append(info["acting"])
+            path.append(info["ee_position"])
             if terminated:
                 break
-        return k + 1, {**info, "start": start["ee_position"], "shielded": shielded}
+        return k + 1, {**info, "start": start["ee_position"], "shielded": shielded, "steps_acting": acting,
+                       "ee_path": path}
     finally:
         env.close()
 
@@ -290,8 +328,10 @@ def test_slide_carries_the_held_tool_along_the_box_to_a_goal_beside_it():
     beside = np.array([0.0, 0.1, 0.0])
     steps, info = _push_into_a_box(SafetyLayer(workspace_guard=0.01, ray_shield=0.05), goal_offset=beside)
     assert steps == 60 and not info["collision"] and info["distance"] > 0.09
+    assert {a["source"] for a in info["steps_acting"]} <= {"policy", "held"}
     steps, info = _push_into_a_box(ACTING_SAFETY, goal_offset=beside)
     assert steps == 60 and not info["collision"] and info["distance"] < 0.02
+    assert "slide" in {a["source"] for a in info["steps_acting"]}
 
 
 def test_a_held_goal_step_moves_the_tool_along_the_box_and_never_into_it():
@@ -327,7 +367,7 @@ def test_slide_steps_along_the_allowed_direction_nearest_the_goal_when_the_goal_
 
 
 def _positions_pushing_into_a_box(safety: SafetyLayer, steps: int = 60) -> np.ndarray:
-    env = exp1_around_the_tool([_box_behind], safety=safety)
+    env = acting_around_the_tool([_box_behind], layers(safety=safety))
     try:
         env.reset(seed=0)
         positions = []
@@ -381,14 +421,56 @@ def test_shielded_term_costs_each_held_step_and_nothing_before():
 def test_env_guard_holds_the_tool_inside_exp1():
     """-y leaves exp1's workspace (y >= 0.3) at step 21 from y = 0.4; guarded, the tool
     stops 1 cm inside and keeps moving along x."""
-    env = ReachEnv(robot="ur5", scenario="exp1", safety=SafetyLayer(workspace_guard=0.01))
+    env = ActingEnv(ReachEnv(robot="ur5", scenario="exp1"), layers(safety=SafetyLayer(workspace_guard=0.01)))
+    reach = env.unwrapped
     try:
         env.reset(seed=0)
-        x0 = env.ee_pos[0]
+        x0 = reach.ee_pos[0]
         for _ in range(40):
             _, _reward, terminated, _truncated, info = env.step(np.array([0.3, -1, 0, 0, 0, 0], np.float32))
             assert not terminated and not info["out_of_bounds"]
-        assert 0.31 - 0.005 <= env.ee_pos[1] <= 0.31 + 1e-3
-        assert env.ee_pos[0] == pytest.approx(x0 + 40 * 0.3 * 0.005, abs=2e-3)
+            assert info["acting"]["source"] == "policy"  # reshaped, never replaced
+        assert 0.31 - 0.005 <= reach.ee_pos[1] <= 0.31 + 1e-3
+        assert reach.ee_pos[0] == pytest.approx(x0 + 40 * 0.3 * 0.005, abs=2e-3)
     finally:
         env.close()
+
+
+def test_without_the_guard_the_same_push_leaves_exp1():
+    """The guard's test above, with the guard switched off by name: the tool leaves the
+    workspace and the episode ends."""
+    config = layers(safety=SafetyLayer(workspace_guard=0.01)).without("workspace_guard")
+    assert config.safety.workspace_guard == 0.0 and "workspace_guard" not in config.layers
+    env = ActingEnv(ReachEnv(robot="ur5", scenario="exp1"), config)
+    try:
+        env.reset(seed=0)
+        for _ in range(40):
+            _, _, terminated, _, info = env.step(np.array([0.3, -1, 0, 0, 0, 0], np.float32))
+            if terminated:
+                break
+        assert info["out_of_bounds"]
+    finally:
+        env.close()
+
+
+def test_a_plate_in_front_of_the_tool_holds_the_push_and_the_slide_takes_over():
+    """The box's face across the push, through the shield alone (the other layers off by
+    name): once a ray sees it within the shield, the push is cut to nothing and the tool
+    stays where it is, the policy's step reshaped, not replaced (IK's one iteration on the
+    empty step may turn the joints by rounding, so ``held`` is not promised). With the slide
+    the held push becomes a step along the face (``source`` slide), the arm never still."""
+    alone = ActingConfig().without("final_approach", "detour", "slide", "arm_guard", "resample")
+    assert alone.layers == ("ray_shield", "workspace_guard")
+    steps, info = _push_into_a_box(alone)
+    acting, path = info["steps_acting"], np.array(info["ee_path"])
+    assert steps == 60 and not info["collision"]
+    moved = np.linalg.norm(np.diff(np.vstack([info["start"], path]), axis=0), axis=1)
+    first = int(np.argmax(moved < 1e-6))
+    assert 1 <= first < 8 and np.all(moved[:first] > 0.004) and np.all(moved[first:] < 1e-6)
+    assert all(a["source"] in ("policy", "held") and a["proposed"] == "policy" for a in acting)
+    steps, info = _push_into_a_box(ActingConfig().without("final_approach", "detour", "arm_guard", "resample"))
+    acting = info["steps_acting"]
+    assert steps == 60 and not info["collision"]
+    slid = [a for a in acting if a["source"] == "slide"]
+    assert len(slid) > 40 and not any(a["held"] for a in slid)
+    assert not any(a["held"] for a in acting)

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 from geometry import segment_hits, signed_distance
 
-from rayreach.env import ReachEnv
-from rayreach.kinematics import IKParams
+from rayreach.env.reach import ReachEnv
+from rayreach.sim.kinematics import IKParams
 from rayreach.scenarios import EXPERIMENTS, ScenarioError, get_scenario
 from rayreach.scenarios.feasibility import goal_configuration, solve_start
 from rayreach.scenarios.random_world import KINDS, RandomWorldConfig, RandomWorlds, shelf_boxes, world_kinds

@@ -21,8 +21,8 @@ import pytest
 from geometry import signed_distance
 
 from rayreach.scenarios.schema import ObstacleSpec
-from rayreach.scene import OBSTACLE_GROUP
-from rayreach.sensors import (
+from rayreach.sim.scene import OBSTACLE_GROUP
+from rayreach.sim.sensors import (
     N_RAYS,
     RAY_RANGE,
     SENSOR_SLICES,
@@ -31,7 +31,7 @@ from rayreach.sensors import (
     RayModel,
     ray_layout,
 )
-from rayreach.transforms import quaternion_to_matrix, rpy_to_matrix
+from rayreach.sim.transforms import quaternion_to_matrix, rpy_to_matrix
 
 BULLET_SURFACE_TOL = 1.05e-3
 """Bullet's ray hit points lie within this distance (m) of the analytic surface."""

@@ -12,12 +12,14 @@ from statistics import NormalDist
 import numpy as np
 import pytest
 
-from rayreach.detour import Detour
-from rayreach.env import ReachEnv
-from rayreach.execution import Executor
+from rayreach.acting.detour import Detour
+from rayreach.env.reach import ReachEnv
+from rayreach.evaluate.executor import Executor
 from rayreach.planners import make_planner
 from rayreach.planners.drl import MODELS_DIR
-from rayreach.policy import ActingPolicy, FinalApproach, load_policy
+from rayreach.acting.resample import ActingPolicy
+from rayreach.acting.final_approach import FinalApproach
+from rayreach.learning.policy import load_policy
 from rayreach.robots import get_robot
 
 CASES = [("ur5", "exp1"), ("kr16", "exp4")]
@@ -117,9 +119,9 @@ def test_drl_alone_runs_the_policy_without_the_acting_layers_and_restores_them()
 def test_rollout_counts_outcomes_per_world_kind():
     """``rollout`` on random worlds: the outcomes add up to the episodes, and each kind's
     counts are those of the worlds that drew it (the same worlds, replayed one by one)."""
-    from rayreach.env import episode_outcome
-    from rayreach.rollout import EVAL_SEED_OFFSET, rollout
-    from rayreach.safety import ACTING_SAFETY
+    from rayreach.env.reach import episode_outcome
+    from rayreach.evaluate.rollout import EVAL_SEED_OFFSET, rollout
+    from rayreach.acting.shield import ACTING_SAFETY
     from rayreach.scenarios.random_world import world_kinds
 
     summary = rollout(MODELS_DIR / "kr16.zip", "random", episodes=4, progress=False)
@@ -207,7 +209,7 @@ def test_the_kr16_turns_its_tool_to_reach_a_goal_beside_an_upright_plate():
     """A random world (seed 1,000,035) with a plate 6 cm beside the goal: the tool, tilted
     across the plate's edge, reaches the goal by turning towards its path; without the turn
     the final approach is refused and the run times out."""
-    from rayreach.rollout import rollout
+    from rayreach.evaluate.rollout import rollout
 
     world = dict(episodes=1, seed=1_000_035, progress=False)
     assert rollout(MODELS_DIR / "kr16.zip", "random", **world).outcomes["success"] == 1
@@ -219,8 +221,8 @@ def test_the_ur5s_tool_is_held_off_a_box_it_saw():
     """A random world (seed 1,000,045) that starts with a box beside the tool: its rays see
     the box, the step after sweeps the tool's blind side into it, unless the arm's rule
     watches the tool too (``SafetyLayer.guard_tool``)."""
-    from rayreach.rollout import rollout
-    from rayreach.safety import ACTING_SAFETY
+    from rayreach.evaluate.rollout import rollout
+    from rayreach.acting.shield import ACTING_SAFETY
 
     world = dict(episodes=1, seed=1_000_045, progress=False)
     assert rollout(MODELS_DIR / "ur5.zip", "random", **world).outcomes["success"] == 1
@@ -232,8 +234,8 @@ def test_the_ur5s_tool_keeps_its_own_clearance_from_a_moving_cover():
     """A random world (seed 1,000,173) with a moving cover over the goal: held 1 cm off what
     its rays saw, the tool strikes the cover on its way in; held 2 cm off
     (``SafetyLayer.tool_clearance``, the acting default), it reaches the goal."""
-    from rayreach.rollout import rollout
-    from rayreach.safety import ACTING_SAFETY
+    from rayreach.evaluate.rollout import rollout
+    from rayreach.acting.shield import ACTING_SAFETY
 
     world = dict(episodes=1, seed=1_000_173, progress=False)
     assert ACTING_SAFETY.tool_clearance == 0.02
@@ -246,7 +248,7 @@ def test_the_ur5_is_taken_round_a_goal_slot_it_hovers_above():
     """A random world (seed 3,000,000): the goal between two plates, a box on the way. The
     policy stalls short of them; the detour takes the tool round the slot's plates, into its
     open end, where the final approach finishes. Without the detour the run times out."""
-    from rayreach.rollout import rollout
+    from rayreach.evaluate.rollout import rollout
 
     world = dict(episodes=1, seed=3_000_000, progress=False)
     assert rollout(MODELS_DIR / "ur5.zip", "random", **world).outcomes["success"] == 1

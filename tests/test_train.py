@@ -14,9 +14,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from rayreach.curriculum import AugmentedGoalSize, ObstacleCurriculum
-from rayreach.policy import CheckpointError, load_policy, read_bundle_meta, train_command
-from rayreach.train import TrainState, append_curve
+from rayreach.learning.curriculum import AugmentedGoalSize, ObstacleCurriculum
+from rayreach.learning.bundles import CheckpointError, read_bundle_meta
+from rayreach.learning.policy import load_policy
+from rayreach.learning.export import train_command
+from rayreach.learning.train import TrainState, append_curve
 
 RAYREACH = [sys.executable, "-m", "rayreach.cli"]
 
@@ -130,7 +132,7 @@ def test_train_state_keeps_true_size_outcomes_apart():
 
 
 def test_the_update_uses_no_more_threads_than_the_run_has_workers():
-    from rayreach.train import TrainConfig, update_threads
+    from rayreach.learning.train import TrainConfig, update_threads
 
     assert update_threads(TrainConfig(workers=1), 2) == 1
     assert update_threads(TrainConfig(workers=2), 2) == 2

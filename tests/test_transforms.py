@@ -8,7 +8,7 @@ import numpy as np
 import pybullet as p
 import pytest
 
-from rayreach.transforms import (
+from rayreach.sim.transforms import (
     matrix_to_quaternion,
     matrix_to_rotvec,
     matrix_to_rpy,

@@ -7,8 +7,8 @@ import time
 import numpy as np
 from stable_baselines3.common.vec_env import DummyVecEnv
 
-from rayreach.train import TrainConfig, make_env_fn
-from rayreach.vec_env import WorkerVecEnv
+from rayreach.learning.train import TrainConfig, make_env_fn
+from rayreach.learning.vec_env import WorkerVecEnv
 
 
 def test_worker_vec_env_matches_dummy_vec_env_and_routes_attributes():

@@ -19,7 +19,7 @@ for _robot in ("UR5", "KR16"):
     _id = f"rayreach/Reach-{_robot}-v0"
     if _id not in registry:
         # no max_episode_steps: the env truncates itself at its step budget, with the paper's -5
-        register(id=_id, entry_point="rayreach.env:ReachEnv", kwargs={"robot": _robot.lower()})
+        register(id=_id, entry_point="rayreach.env.reach:ReachEnv", kwargs={"robot": _robot.lower()})
     ENV_IDS.append(_id)
 
 __all__ = ["ENV_IDS", "__version__"]

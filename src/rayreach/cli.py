@@ -10,6 +10,13 @@ from typing import Sequence
 
 EVAL_PLANNERS = "drl,rrt,ncrrt,ompl-rrt,ompl-rrtconnect"
 
+LAYER_HELP = {"final_approach": "straight final approach near the goal", "ray_shield": "ray shield and its hit memory",
+              "slide": "shield's slide towards the goal", "workspace_guard": "workspace guard",
+              "arm_guard": "arm's rule (blind links and tool kept off what the rays saw)",
+              "detour": "detour round what the rays saw for a stalled policy",
+              "resample": "fresh draw of the action where the arm was held"}
+"""One switch per acting layer (``rayreach.acting.LAYERS``), for ``rollout``."""
+
 
 def _scenario_arg(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
@@ -26,10 +33,11 @@ def _pick_scenario(args: argparse.Namespace, parser: argparse.ArgumentParser) ->
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from rayreach.demonstrations import EXPERTS, CloneConfig  # numpy only
-    from rayreach.detour import Detour  # numpy only
-    from rayreach.policy import FinalApproach  # numpy only
-    from rayreach.safety import ACTING_SAFETY  # numpy only
+    from rayreach.learning.demonstrations import EXPERTS, CloneConfig  # numpy only
+    from rayreach.acting.detour import Detour  # numpy only
+    from rayreach.acting.final_approach import FinalApproach  # numpy only
+    from rayreach.acting.shield import ACTING_SAFETY  # numpy only
+    from rayreach.scenarios.splits import EVALUATION_SPLITS  # no imports
 
     parser = argparse.ArgumentParser(prog="rayreach", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
@@ -60,16 +68,22 @@ def build_parser() -> argparse.ArgumentParser:
     bplan.add_argument("--json", action="store_true", help="print one JSON line")
 
     ev = sub.add_parser("evaluate", help="the paper's experiments: every planner, N runs, results.db, table, plots")
-    ev.add_argument("--experiments", default="1-7", help="e.g. 1-7, 1,3, exp4, random-ur5")
-    ev.add_argument("--planners", default=EVAL_PLANNERS, help="comma-separated, of: drl, drl-alone (the policy without final approach and safety layer), rrt, birrt, ncrrt, ompl-rrt, ompl-rrtconnect (--suite random: drl)")
+    ev.add_argument("--experiments", default="1-7", help="e.g. 1-7, 1,3, exp4, random-ur5@test")
+    ev.add_argument("--planners", default=None,
+                    help="comma-separated, of: drl, drl-alone (the policy without the acting layers), drl-no-LAYER "
+                         "(one layer off), rrt, birrt, ncrrt, ompl-rrt, ompl-rrtconnect "
+                         f"(default {EVAL_PLANNERS}; --suite random: drl,drl-alone)")
     ev.add_argument("--runs", type=int, default=30, help="runs per experiment and planner")
     ev.add_argument("--suite", choices=["random"], default=None,
-                    help="held-out random worlds instead of --experiments (seeds disjoint from training)")
+                    help="random worlds instead of --experiments, from --split's seeds (disjoint from training)")
+    ev.add_argument("--split", choices=EVALUATION_SPLITS, default=None,
+                    help="seed split of --suite random (default test; stored as experiment random-ROBOT@SPLIT): "
+                         "tune on validation, quote test")
     ev.add_argument("--robot", default="ur5,kr16", help="robots of --suite random (comma-separated)")
     ev.add_argument("--episodes", type=int, default=None, help="runs per robot of --suite random")
     ev.add_argument("--obstacles", type=int, default=None,
-                    help="obstacles per world of --suite random (default 3, the held-out suite; stored as "
-                         "experiment random-ROBOT:N otherwise)")
+                    help="obstacles per world of --suite random (default 3, the training curriculum's maximum; "
+                         "stored as experiment random-ROBOT:N@SPLIT otherwise)")
     ev.add_argument("--out", required=True, help="results directory, e.g. results/paper")
     ev.add_argument("--workers", type=int, default=None, help="worker processes (default: CPU cores)")
     ev.add_argument("--time-limit", type=float, default=30.0, help="planning time limit per query, s")
@@ -119,8 +133,10 @@ def build_parser() -> argparse.ArgumentParser:
     roll.add_argument("--stochastic", action="store_true", help="sample actions instead of the mean")
     roll.add_argument("--tolerance", type=float, default=0.01, help="goal tolerance, m (paper: 0.01)")
     roll.add_argument("--obstacles", type=int, default=None, help="obstacles per random world")
-    roll.add_argument("--no-final-approach", action="store_true",
-                      help="without the straight final approach near the goal (rayreach.policy.FinalApproach)")
+    for layer, what in LAYER_HELP.items():
+        roll.add_argument(f"--no-{layer.replace('_', '-')}", dest=f"no_{layer}", action="store_true",
+                          help=f"switch off the {what} (rayreach.acting)")
+    roll.add_argument("--policy-alone", action="store_true", help="switch off every acting layer: the policy alone")
     roll.add_argument("--final-approach-radius", type=float, default=None,
                       help="distance to the goal within which the final approach may act, m (default: the robot's, "
                            "UR5 0.1, KR16 0.2)")
@@ -128,35 +144,31 @@ def build_parser() -> argparse.ArgumentParser:
                       help="the final approach never turns the tool towards its path (FinalApproach.turn)")
     roll.add_argument("--stall-steps", type=int, default=FinalApproach.stall_steps,
                       help="step towards the goal once this many steps brought it less than 1 cm nearer "
-                           "(default 0: off; 100 was measured, docs/training.md)")
-    roll.add_argument("--no-detour", action="store_true",
-                      help="never take a stalled policy round what the rays have seen (rayreach.detour)")
+                           "(default 0: off)")
     roll.add_argument("--detour-steps", type=int, default=Detour.stall_steps,
                       help="take the detour once this many steps brought the tool less than 1 cm nearer")
     roll.add_argument("--workspace-guard", type=float, default=ACTING_SAFETY.workspace_guard,
-                      help="hold the tool this far inside the workspace, m (0: off; rayreach.safety)")
+                      help="hold the tool this far inside the workspace, m")
     roll.add_argument("--ray-shield", type=float, default=ACTING_SAFETY.ray_shield,
-                      help="no motion towards what a ray sees nearer than this, m (0: off; rayreach.safety)")
+                      help="no motion towards what a ray sees nearer than this, m")
     roll.add_argument("--slide", type=float, default=ACTING_SAFETY.slide,
-                      help="step towards the goal when the layer leaves less than this share of the policy's step "
-                           "(0: off; rayreach.safety)")
+                      help="step towards the goal when the shield leaves less than this share of the policy's step")
     roll.add_argument("--memory-steps", type=int, default=ACTING_SAFETY.memory_steps,
-                      help="the shield also holds off what the rays saw near in this many last steps "
-                           "(0: off; rayreach.safety.HitMemory)")
+                      help="the shield also holds off what the rays saw near in this many last steps")
     roll.add_argument("--arm-clearance", type=float, default=ACTING_SAFETY.arm_clearance,
                       help="refuse steps that bring an arm link nearer than this to what the rays saw in the last "
-                           f"{ACTING_SAFETY.arm_memory_steps} steps, m (0: off; rayreach.arm_guard)")
+                           f"{ACTING_SAFETY.arm_memory_steps} steps, m")
     roll.add_argument("--no-guard-tool", action="store_true",
-                      help="the arm's rule watches the arm's blind links only, not the tool (rayreach.arm_guard)")
+                      help="the arm's rule watches the arm's blind links only, not the tool")
     roll.add_argument("--tool-clearance", type=float, default=ACTING_SAFETY.tool_clearance,
-                      help="the clearance the arm's rule keeps the tool at, m (rayreach.safety.SafetyLayer)")
-    roll.add_argument("--no-resample", action="store_true",
-                      help="act on the policy's mean action even where the arm is held and the observation repeats "
-                           "(rayreach.policy.ActingPolicy)")
+                      help="the clearance the arm's rule keeps the tool at, m")
     roll.add_argument("--start-clearance", type=float, default=0.0,
                       help="random worlds: keep the robot's start this far from every obstacle, m (default 0: free of "
                            "collision only; the authors' generator kept 0.05)")
-    roll.add_argument("--seed", type=int, default=None, help="seed of the first random world (default 1000000)")
+    roll.add_argument("--split", choices=EVALUATION_SPLITS, default="validation",
+                      help="seed split of random worlds (validation: for tuning; test: for quoting, never tuned on)")
+    roll.add_argument("--seed", type=int, default=None,
+                      help="seed of the first random world, within --split (default: the split's first)")
     roll.add_argument("--json", action="store_true", help="print one JSON line")
 
     export = sub.add_parser("export", help="copy a run's model (or latest checkpoint) to a shipped file + JSON")
@@ -201,7 +213,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.command == "train":
             return _train(args, argv)
         if args.command == "export":
-            from rayreach.policy import export_bundle
+            from rayreach.learning.export import export_bundle
 
             for path in export_bundle(args.run, args.to):
                 print(f"wrote {path}")
@@ -221,8 +233,8 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def _show(args: argparse.Namespace, scenario: str) -> int:
-    from rayreach.env import ReachEnv
-    from rayreach.render import draw_scene
+    from rayreach.env.reach import ReachEnv
+    from rayreach.evaluate.render import draw_scene
 
     if args.gui:
         env = ReachEnv(scenario=scenario, render_mode="human")
@@ -241,9 +253,9 @@ def _show(args: argparse.Namespace, scenario: str) -> int:
         env.close()
         print(f"wrote {out}")
         return 0
-    from rayreach.execution import Executor
+    from rayreach.evaluate.executor import Executor
     from rayreach.planners import make_planner
-    from rayreach.render import write_video
+    from rayreach.evaluate.render import write_video
 
     with Executor(scenario) as ex:
         planner = make_planner(args.planner, ex.robot, model=args.model)
@@ -261,7 +273,7 @@ def _show(args: argparse.Namespace, scenario: str) -> int:
 
 
 def _bench(args: argparse.Namespace) -> int:
-    from rayreach.bench import bench_env, step_breakdown
+    from rayreach.evaluate.bench import bench_env, step_breakdown
 
     result = bench_env(args.robot, args.scenario, steps=args.steps, rounds=args.rounds)
     record: dict = {
@@ -291,17 +303,18 @@ def _evaluate(args: argparse.Namespace) -> int:
     from rayreach.evaluate.report import summarise
     from rayreach.evaluate.runner import random_experiment
 
-    planners = tuple(p.strip() for p in args.planners.split(",") if p.strip())
+    default_planners = "drl,drl-alone" if args.suite == "random" else EVAL_PLANNERS
+    planners = tuple(p.strip() for p in (args.planners or default_planners).split(",") if p.strip())
     runs = args.runs
     if args.suite == "random":
         obstacles = None if args.obstacles == EvaluationConfig.obstacles else args.obstacles
-        experiments = tuple(random_experiment(r.strip(), obstacles) for r in args.robot.split(",") if r.strip())
-        if args.planners == EVAL_PLANNERS:
-            planners = ("drl",)
+        experiments = tuple(random_experiment(r.strip(), obstacles, args.split or "test")
+                            for r in args.robot.split(",") if r.strip())
         runs = args.episodes or 500
     else:
-        if args.obstacles is not None:
-            raise ValueError("--obstacles applies to --suite random (the experiments' scenes are fixed)")
+        for option, value in (("--obstacles", args.obstacles), ("--split", args.split)):
+            if value is not None:
+                raise ValueError(f"{option} applies to --suite random (the experiments' scenes are fixed)")
         experiments = parse_experiments(args.experiments)
     models = tuple((robot, path) for robot, path in (("ur5", args.model_ur5), ("kr16", args.model_kr16)) if path)
     config = EvaluationConfig(experiments, planners, runs=runs, time_limit=args.time_limit,
@@ -321,7 +334,8 @@ def _evaluate(args: argparse.Namespace) -> int:
         store.close()
         for (experiment, planner), s in sorted(summarise(rows).items()):
             rates = ", ".join(f"{k} {v / s['runs']:.1%}" for k, v in s["outcomes"].items())
-            print(f"{experiment} {planner}: {s['runs']} worlds: {rates}")
+            share = "" if s["policy_share"] is None else f"; policy chose {s['policy_share']:.1%} of steps"
+            print(f"{experiment} {planner}: {s['runs']} worlds: {rates}{share}")
     else:
         print(written["table"].read_text())
     for kind, path in written.items():
@@ -330,7 +344,7 @@ def _evaluate(args: argparse.Namespace) -> int:
 
 
 def _bench_planners(args: argparse.Namespace) -> int:
-    from rayreach.bench import bench_planners
+    from rayreach.evaluate.bench import bench_planners
     from rayreach.planners import SAMPLING_PLANNERS
     from rayreach.planners.ompl_peer import ompl_available
 
@@ -355,9 +369,9 @@ def _bench_planners(args: argparse.Namespace) -> int:
 def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
     from dataclasses import replace
 
-    from rayreach.curriculum import GoalSizeParams, ObstacleParams
+    from rayreach.learning.curriculum import GoalSizeParams, ObstacleParams
     from rayreach.robots import get_robot
-    from rayreach.train import TrainConfig, train
+    from rayreach.learning.train import TrainConfig, train
 
     robot = get_robot(args.robot).name
     config = TrainConfig(robot=robot, timesteps=args.timesteps, envs=args.envs, seed=args.seed,
@@ -395,33 +409,39 @@ def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
     return 0
 
 
-def _rollout(args: argparse.Namespace, scenario: str) -> int:
-    from rayreach.detour import Detour
-    from rayreach.policy import FinalApproach
-    from rayreach.rollout import EVAL_SEED_OFFSET, rollout
-    from rayreach.safety import SafetyLayer
+def acting_from_args(args: argparse.Namespace):
+    """The ``ActingConfig`` that ``rollout``'s flags ask for."""
+    from rayreach.acting import LAYERS, ActingConfig
+    from rayreach.acting.detour import Detour
+    from rayreach.acting.final_approach import FinalApproach
+    from rayreach.acting.shield import SafetyLayer
 
     safety = SafetyLayer(args.workspace_guard, args.ray_shield, args.slide, args.memory_steps, args.arm_clearance,
                          guard_tool=not args.no_guard_tool, tool_clearance=args.tool_clearance)
+    config = ActingConfig(final_approach=FinalApproach(args.final_approach_radius, stall_steps=args.stall_steps,
+                                                       turn=not args.no_turn),
+                          safety=safety, detour=Detour(stall_steps=args.detour_steps))
+    off = LAYERS if args.policy_alone else [layer for layer in LAYERS if getattr(args, f"no_{layer}")]
+    return config.without(*off)
+
+
+def _rollout(args: argparse.Namespace, scenario: str) -> int:
+    from rayreach.evaluate.rollout import rollout
+
+    acting = acting_from_args(args)
     summary = rollout(args.model, scenario, episodes=args.episodes, deterministic=not args.stochastic,
                       goal_tolerance=args.tolerance, n_obstacles=args.obstacles, progress=not args.json,
-                      final_approach=None if args.no_final_approach
-                      else FinalApproach(args.final_approach_radius, stall_steps=args.stall_steps,
-                                         turn=not args.no_turn),
-                      safety=safety, resample=not args.no_resample,
-                      detour=None if args.no_detour else Detour(stall_steps=args.detour_steps),
-                      start_clearance=args.start_clearance,
-                      seed=EVAL_SEED_OFFSET if args.seed is None else args.seed)
+                      acting=acting, start_clearance=args.start_clearance, seed=args.seed, split=args.split)
     if args.json:
         print(json.dumps({"scenario": scenario, **summary.to_dict()}))
         return 0
-    helpers = [name for name, on in (("final approach", summary.final_approach), ("detour", summary.detour),
-                                     ("safety layer", safety.active or safety.arm_clearance > 0)) if on]
-    mode = ("deterministic" if summary.deterministic else "stochastic") + ", " + (" + ".join(helpers) or "policy alone")
+    mode = ("deterministic" if summary.deterministic else "stochastic") + ", " + (
+        " + ".join(summary.acting_layers) or "policy alone")
     print(f"{scenario}: {summary.episodes} episodes ({mode}), success {summary.success_rate:.1%}, "
           f"collisions {summary.collision_rate:.1%}, mean path {summary.path_length_mean:.3f} m, "
           f"mean steps {summary.steps_mean:.0f}")
     print("outcomes: " + ", ".join(f"{k.replace('_', ' ')} {v}" for k, v in summary.outcomes.items()))
+    print("steps by source: " + ", ".join(f"{k.replace('_', ' ')} {v:.1%}" for k, v in summary.acting_share.items()))
     for kind, counts in summary.by_kind.items():  # random worlds: which kinds of world fail
         n = counts["episodes"]
         print(f"  {kind:>13}: {n:4d} worlds, " + ", ".join(
@@ -430,7 +450,7 @@ def _rollout(args: argparse.Namespace, scenario: str) -> int:
 
 
 def _clone(args: argparse.Namespace) -> int:
-    from rayreach.demonstrations import CloneConfig, clone_into_checkpoint
+    from rayreach.learning.demonstrations import CloneConfig, clone_into_checkpoint
 
     config = CloneConfig(episodes=args.episodes, rounds=args.rounds, anchor_episodes=args.anchor_episodes,
                          anchor_tolerance=args.anchor_tolerance,
@@ -445,7 +465,7 @@ def _clone(args: argparse.Namespace) -> int:
 
 
 def _demo(args: argparse.Namespace) -> int:
-    from rayreach.demo import scripted_episode
+    from rayreach.evaluate.demo import scripted_episode
 
     summary = scripted_episode(args.scenario, args.out)
     print(

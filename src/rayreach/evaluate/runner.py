@@ -6,6 +6,7 @@ from __future__ import annotations
 import multiprocessing as mp
 import os
 import signal
+from collections import OrderedDict
 from dataclasses import dataclass, field
 from importlib import metadata
 from pathlib import Path
@@ -14,37 +15,65 @@ from typing import Any, Iterator
 from tqdm import tqdm
 
 from rayreach.evaluate.store import ResultsStore
-from rayreach.execution import ExecutionConfig, Executor, RunRecord
+from rayreach.evaluate.executor import ExecutionConfig, Executor, RunRecord
 from rayreach.planners import PLANNER_NAMES, GlobalPlanner, ReactivePlanner, make_planner
 from rayreach.robots import get_robot
-from rayreach.rollout import EVAL_SEED_OFFSET
 from rayreach.scenarios import EXPERIMENTS
+from rayreach.scenarios.splits import EVALUATION_SPLITS, get_split
 
 RANDOM_PREFIX = "random-"
-"""Experiment names ``random-ur5`` / ``random-kr16``: held-out random worlds of that robot,
-with ``EvaluationConfig.obstacles`` each; ``random-ur5:2``: with 2 obstacles each."""
+"""Experiment names ``random-ur5@test`` / ``random-kr16@validation``: random worlds of that
+robot from that seed split (``rayreach.scenarios.splits``), with ``EvaluationConfig.obstacles``
+each; ``random-ur5:2@test``: with 2 obstacles each."""
+
+UNSPLIT = "validation"
+"""The split of a random experiment named without one (``random-ur5``, ``random-ur5:2``):
+databases from before names carried the split drew from seed 1,000,000 on, the validation range."""
+
+EXECUTORS_KEPT = 4
+"""Executors (one PyBullet world each, about 56 MB) a worker keeps; the least recently used
+is closed for a new scene, so a worker's memory stays flat however many scenes it runs."""
 
 
-def random_experiment(robot: str, obstacles: int | None = None) -> str:
-    """The experiment name of ``robot``'s random worlds (``obstacles`` None: the config's count)."""
-    return f"{RANDOM_PREFIX}{robot}" + ("" if obstacles is None else f":{obstacles}")
+@dataclass(frozen=True)
+class RandomExperiment:
+    """What a ``random-ROBOT[:N][@SPLIT]`` experiment name says."""
+
+    robot: str
+    obstacles: int
+    split: str
 
 
-def parse_random(experiment: str, default_obstacles: int) -> tuple[str, int]:
-    """(robot, obstacles per world) of a ``random-ROBOT[:N]`` experiment name."""
-    robot, _, count = experiment[len(RANDOM_PREFIX):].partition(":")
+def random_experiment(robot: str, obstacles: int | None = None, split: str = "test") -> str:
+    """The experiment name of ``robot``'s random worlds from ``split`` (``obstacles`` None: the
+    config's count); the split is part of the name so its results never mix with another's."""
+    if split not in EVALUATION_SPLITS:
+        raise ValueError(f"unknown evaluation split '{split}'; valid: {', '.join(EVALUATION_SPLITS)}")
+    return f"{RANDOM_PREFIX}{robot}" + ("" if obstacles is None else f":{obstacles}") + f"@{split}"
+
+
+def parse_random(experiment: str, default_obstacles: int) -> RandomExperiment:
+    """Robot, obstacles per world and seed split of a ``random-ROBOT[:N][@SPLIT]`` name."""
+    body, at, split = experiment[len(RANDOM_PREFIX):].partition("@")
+    if not at:
+        split = UNSPLIT
+    elif split not in EVALUATION_SPLITS:
+        raise ValueError(f"'{experiment}': unknown split '{split}' after '@'; "
+                         f"valid: {', '.join(EVALUATION_SPLITS)}")
+    robot, _, count = body.partition(":")
     if not count:
-        return robot, default_obstacles
+        return RandomExperiment(robot, default_obstacles, split)
     if not count.isdigit():
-        raise ValueError(f"'{experiment}': the obstacle count after ':' must be a whole number, e.g. random-ur5:2")
-    return robot, int(count)
+        raise ValueError(f"'{experiment}': the obstacle count after ':' must be a whole number, "
+                         "e.g. random-ur5:2@test")
+    return RandomExperiment(robot, int(count), split)
 
 
 @dataclass(frozen=True)
 class EvaluationConfig:
     experiments: tuple[str, ...]
-    """``exp1``..``exp7``, ``random-ur5``, ``random-kr16`` (``random-ur5:2``: 2 obstacles per
-    world) or scene files."""
+    """``exp1``..``exp7``, ``random-ur5@test``, ``random-kr16@validation`` (``random-ur5:2@test``:
+    2 obstacles per world) or scene files."""
     planners: tuple[str, ...]
     runs: int = 30
     workers: int = field(default_factory=lambda: os.cpu_count() or 1)
@@ -55,7 +84,7 @@ class EvaluationConfig:
     smooth: bool = False
     replan: bool = False
     obstacles: int = 3
-    """Obstacles per held-out random world (the training curriculum's maximum)."""
+    """Obstacles per random world (the training curriculum's maximum)."""
     models: tuple[tuple[str, str], ...] = ()
     """(robot, model path) overriding the shipped DRL policies."""
 
@@ -67,11 +96,11 @@ class EvaluationConfig:
             raise ValueError(f"runs and workers must be >= 1, got {self.runs} and {self.workers}")
         for experiment in self.experiments:  # here, not as 500 crash records from the workers
             if experiment.startswith(RANDOM_PREFIX):
-                get_robot(parse_random(experiment, self.obstacles)[0])
+                get_robot(parse_random(experiment, self.obstacles).robot)
 
 
 def parse_experiments(text: str) -> tuple[str, ...]:
-    """``1-7``, ``1,3``, ``exp4`` or ``random-ur5`` (mixed, comma-separated) to experiment names."""
+    """``1-7``, ``1,3``, ``exp4`` or ``random-ur5@test`` (mixed, comma-separated) to experiment names."""
     names: list[str] = []
     for part in (p.strip() for p in text.split(",") if p.strip()):
         if part.startswith(RANDOM_PREFIX) or part.endswith(".json"):
@@ -82,7 +111,7 @@ def parse_experiments(text: str) -> tuple[str, ...]:
             low, _, high = bare.partition("-")
             numbers = range(int(low), int(high or low) + 1)
         except ValueError:
-            raise ValueError(f"cannot read experiment '{part}'; use e.g. 1-7, 1,3, exp4 or random-ur5") from None
+            raise ValueError(f"cannot read experiment '{part}'; use e.g. 1-7, 1,3, exp4 or random-ur5@test") from None
         for n in numbers:
             if f"exp{n}" not in EXPERIMENTS:
                 raise ValueError(f"no experiment {n}; known: {', '.join(EXPERIMENTS)}")
@@ -91,9 +120,11 @@ def parse_experiments(text: str) -> tuple[str, ...]:
 
 
 def run_seed(experiment: str, run: int) -> int:
-    """The seed of run ``run``: the same for every planner; random worlds come from the
-    evaluation range, disjoint from training seeds."""
-    return EVAL_SEED_OFFSET + run if experiment.startswith(RANDOM_PREFIX) else run
+    """The seed of run ``run``, the same for every planner; a random experiment's run ``run``
+    plays world ``run`` of its split."""
+    if not experiment.startswith(RANDOM_PREFIX):
+        return run
+    return get_split(parse_random(experiment, EvaluationConfig.obstacles).split).seed(run)
 
 
 def versions() -> dict[str, str]:
@@ -111,24 +142,33 @@ class RunTimeout(Exception):
 
 
 class Worker:
-    """Keeps one executor per experiment and one planner per (name, robot) across runs."""
+    """Keeps the executors of the last :data:`EXECUTORS_KEPT` experiments and one planner per
+    (name, robot) across runs."""
 
-    def __init__(self, config: EvaluationConfig) -> None:
+    def __init__(self, config: EvaluationConfig, keep: int = EXECUTORS_KEPT) -> None:
+        if keep < 1:
+            raise ValueError(f"a worker keeps at least 1 executor, got {keep}")
         self.config = config
-        self.executors: dict[str, Executor] = {}
+        self.keep = keep
+        self.executors: OrderedDict[str, Executor] = OrderedDict()
+        """Least recently used first."""
         self.planners: dict[tuple[str, str], GlobalPlanner | ReactivePlanner] = {}
 
     def executor(self, experiment: str) -> Executor:
-        if experiment not in self.executors:
-            exec_config = ExecutionConfig(replan=self.config.replan)
-            if experiment.startswith(RANDOM_PREFIX):
-                robot, obstacles = parse_random(experiment, self.config.obstacles)
-                ex = Executor("random", robot=robot, config=exec_config)
-                ex.env.set_n_obstacles(obstacles)
-            else:
-                ex = Executor(experiment, config=exec_config)
-            self.executors[experiment] = ex
-        return self.executors[experiment]
+        if experiment in self.executors:
+            self.executors.move_to_end(experiment)
+            return self.executors[experiment]
+        while len(self.executors) >= self.keep:  # before building: one world fewer at the peak
+            self.executors.popitem(last=False)[1].close()
+        exec_config = ExecutionConfig(replan=self.config.replan)
+        if experiment.startswith(RANDOM_PREFIX):
+            suite = parse_random(experiment, self.config.obstacles)
+            ex = Executor("random", robot=suite.robot, config=exec_config)
+            ex.env.set_n_obstacles(suite.obstacles)
+        else:
+            ex = Executor(experiment, config=exec_config)
+        self.executors[experiment] = ex
+        return ex
 
     def planner(self, name: str, robot: str) -> GlobalPlanner | ReactivePlanner:
         if (name, robot) not in self.planners:
@@ -160,6 +200,7 @@ class Worker:
     def close(self) -> None:
         for ex in self.executors.values():
             ex.close()
+        self.executors.clear()
 
 
 def crash_record(planner: str, experiment: str, seed: int, message: str) -> RunRecord:
@@ -194,7 +235,7 @@ def pending_jobs(config: EvaluationConfig, done: set[tuple[str, str, int]]) -> l
 
 def evaluate(config: EvaluationConfig, out: str | Path, progress: bool = True) -> Path:
     """Run what ``out/results.db`` does not hold yet; returns the database path."""
-    from rayreach.train import git_commit
+    from rayreach.learning.train import git_commit
 
     out = Path(out)
     store = ResultsStore(out / "results.db")

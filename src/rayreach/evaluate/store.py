@@ -15,7 +15,7 @@ from typing import Any, Iterator
 
 import numpy as np
 
-from rayreach.execution import RunRecord
+from rayreach.evaluate.executor import RunRecord
 
 SCHEMA = """
 CREATE TABLE IF NOT EXISTS experiments (
@@ -50,6 +50,7 @@ CREATE TABLE IF NOT EXISTS runs (
     steps INTEGER NOT NULL,
     replans INTEGER NOT NULL,
     message TEXT,
+    acting_share TEXT,
     ee_path BLOB,
     versions TEXT NOT NULL,
     git_commit TEXT,
@@ -59,8 +60,12 @@ CREATE TABLE IF NOT EXISTS runs (
 
 COLUMNS = ("experiment", "planner", "run", "seed", "status", "plan_status", "solved", "collision",
            "solution_length", "solution_length_unsmoothed", "joint_path_length", "time", "motion_time",
-           "execution_time", "steps", "replans", "message", "git_commit")
-"""The columns of ``runs.csv`` and :meth:`ResultsStore.rows` (``time`` is the planning time)."""
+           "execution_time", "steps", "replans", "message", "acting_share", "git_commit")
+"""The columns of ``runs.csv`` and :meth:`ResultsStore.rows` (``time`` is the planning time;
+``acting_share``: a dict, empty for global planners and for runs stored before it was kept)."""
+
+ADDED_COLUMNS = {"acting_share": "TEXT"}
+"""Columns of ``runs`` newer than the first databases, added to an old file when it is opened."""
 
 
 def _nan_to_none(x: float) -> float | None:
@@ -86,9 +91,18 @@ class ResultsStore:
         try:
             self.db = sqlite3.connect(self.path)
             self.db.executescript(SCHEMA)
+            self._migrate()
         except sqlite3.DatabaseError as exc:
             raise ValueError(f"{self.path} is not a rayreach results database ({exc}); move it away or "
                              "choose another --out") from exc
+
+    def _migrate(self) -> None:
+        """Add the :data:`ADDED_COLUMNS` an older database lacks (its rows get NULL there)."""
+        present = {row[1] for row in self.db.execute("PRAGMA table_info(runs)")}
+        for name, kind in ADDED_COLUMNS.items():
+            if name not in present:
+                self.db.execute(f"ALTER TABLE runs ADD COLUMN {name} {kind}")
+        self.db.commit()
 
     def close(self) -> None:
         self.db.close()
@@ -117,12 +131,13 @@ class ResultsStore:
         self.db.execute(
             "INSERT OR REPLACE INTO runs (experimentid, plannerid, planner, run, seed, status, plan_status, solved, "
             "collision, solution_length, solution_length_unsmoothed, joint_path_length, time, motion_time, "
-            "execution_time, steps, replans, message, ee_path, versions, git_commit) "
-            "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+            "execution_time, steps, replans, message, acting_share, ee_path, versions, git_commit) "
+            "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
             (eid, pid, record.planner, run, record.seed, record.outcome, record.plan_status, int(record.success),
              int(record.collision), _nan_to_none(record.path_length), _nan_to_none(record.path_length_unsmoothed),
              _nan_to_none(record.joint_path_length), record.planning_time, record.motion_time,
-             record.execution_time, record.steps, record.replans, record.message, _encode_path(record.ee_path),
+             record.execution_time, record.steps, record.replans, record.message,
+             json.dumps(record.acting_share, sort_keys=True), _encode_path(record.ee_path),
              json.dumps(versions, sort_keys=True), git_commit))
         self.db.commit()
 
@@ -131,9 +146,12 @@ class ResultsStore:
         cursor = self.db.execute(
             "SELECT e.name, r.planner, r.run, r.seed, r.status, r.plan_status, r.solved, r.collision, "
             "r.solution_length, r.solution_length_unsmoothed, r.joint_path_length, r.time, r.motion_time, "
-            "r.execution_time, r.steps, r.replans, r.message, r.git_commit "
+            "r.execution_time, r.steps, r.replans, r.message, r.acting_share, r.git_commit "
             "FROM runs r JOIN experiments e ON e.id = r.experimentid ORDER BY e.name, r.planner, r.run")
-        return [dict(zip(COLUMNS, row)) for row in cursor]
+        rows = [dict(zip(COLUMNS, row)) for row in cursor]
+        for row in rows:
+            row["acting_share"] = json.loads(row["acting_share"]) if row["acting_share"] else {}
+        return rows
 
     def paths(self, experiment: str) -> Iterator[tuple[str, int, bool, np.ndarray]]:
         """(planner, run, success, end-effector path) of every run of ``experiment``."""

@@ -1,7 +1,7 @@
 """Planners compared on the same scenes: the DRL policy and sampling planners in joint space.
 
 ``make_planner(name, robot)`` builds any of :data:`PLANNER_NAMES`; the executor
-(:mod:`rayreach.execution`) runs them all the same way.
+(:mod:`rayreach.evaluate.executor`) runs them all the same way.
 """
 
 from __future__ import annotations
@@ -9,6 +9,7 @@ from __future__ import annotations
 from dataclasses import replace
 from pathlib import Path
 
+from rayreach.acting.config import LAYERS, ActingConfig
 from rayreach.planners.base import GlobalPlanner, ReactivePlanner, SamplingPlanner
 from rayreach.planners.ncrrt import NCRRTConfig, ncrrt
 from rayreach.planners.ompl_peer import OMPLConfig, ompl_available, ompl_plan
@@ -17,18 +18,31 @@ from rayreach.planners.rrt import RRTConfig, birrt, rrt
 from rayreach.planners.smoothing import ShortcutConfig
 
 SAMPLING_PLANNERS = ("rrt", "birrt", "ncrrt", "ompl-rrt", "ompl-rrtconnect")
-PLANNER_NAMES = ("drl", "drl-alone", *SAMPLING_PLANNERS)
-"""``drl-alone``: the DRL planner without the executor's final approach and safety layer."""
+DRL_PLANNERS = ("drl", "drl-alone", *(f"drl-no-{layer}" for layer in LAYERS))
+"""``drl``: the policy with every acting layer (``rayreach.acting``); ``drl-alone``: with
+none, as the paper's agent acted; ``drl-no-LAYER``: every layer but one (the ablation)."""
+PLANNER_NAMES = (*DRL_PLANNERS, *SAMPLING_PLANNERS)
+
+
+def drl_acting(name: str) -> ActingConfig:
+    """The acting layers of DRL planner ``name`` (``DRL_PLANNERS``)."""
+    if name == "drl":
+        return ActingConfig()
+    if name == "drl-alone":
+        return ActingConfig.off()
+    if name.startswith("drl-no-") and name[len("drl-no-"):] in LAYERS:
+        return ActingConfig().without(name[len("drl-no-"):])
+    raise ValueError(f"unknown DRL planner '{name}'; valid: {', '.join(DRL_PLANNERS)}")
 
 
 def make_planner(name: str, robot: str, *, model: str | Path | None = None, time_limit: float | None = None,
                  smooth: bool = False) -> GlobalPlanner | ReactivePlanner:
     """Planner ``name`` for ``robot`` with its defaults; ``time_limit`` (s) for sampling
     planners, ``model`` for the DRL planner (default: the shipped policy)."""
-    if name in ("drl", "drl-alone"):
+    if name in DRL_PLANNERS:
         from rayreach.planners.drl import DRLPlanner, shipped_model
 
-        planner = DRLPlanner(model if model is not None else shipped_model(robot), acting_layers=name == "drl")
+        planner = DRLPlanner(model if model is not None else shipped_model(robot), acting=drl_acting(name), name=name)
         if planner.robot != robot:
             raise ValueError(f"model {model} is a {planner.robot} policy, not {robot}")
         return planner
@@ -49,5 +63,5 @@ def make_planner(name: str, robot: str, *, model: str | Path | None = None, time
     return SamplingPlanner(name, algorithm, settings, ShortcutConfig() if smooth else None)
 
 
-__all__ = ["PLANNER_NAMES", "SAMPLING_PLANNERS", "GlobalPlanner", "PlanResult", "ReactivePlanner", "Status",
+__all__ = ["DRL_PLANNERS", "PLANNER_NAMES", "SAMPLING_PLANNERS", "GlobalPlanner", "PlanResult", "ReactivePlanner", "Status",
            "make_planner"]

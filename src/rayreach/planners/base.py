@@ -13,6 +13,7 @@ from typing import Any, Callable
 
 import numpy as np
 
+from rayreach.acting.config import ActingConfig
 from rayreach.planners.collision import CollisionChecker
 from rayreach.planners.result import PlanResult
 from rayreach.planners.smoothing import ShortcutConfig, shortcut
@@ -33,16 +34,16 @@ class GlobalPlanner(ABC):
 
 class ReactivePlanner(ABC):
     name: str
-    acting_layers: bool = True
-    """False: the executor runs the actions as they come, without its final approach and
-    safety layer (``ExecutionConfig``), as the paper's agent acted."""
+    acting: ActingConfig = ActingConfig()
+    """The acting layers the executor runs the planner's actions through
+    (``ActingConfig.off()``: the actions as they come, as the paper's agent acted)."""
 
     def reset(self, seed: int) -> None:
         """Called before each run with the run's seed (for a planner that draws at random)."""
 
     @abstractmethod
-    def act(self, observation: np.ndarray) -> np.ndarray:
-        """The action for this control step."""
+    def act(self, observation: np.ndarray, info: dict[str, Any]) -> np.ndarray:
+        """The action for this control step; ``info``: the last step's (or reset's)."""
 
     @abstractmethod
     def config(self) -> dict[str, Any]:

@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 
 from rayreach.planners.result import PlanResult, Status
-from rayreach.scene import Scene
+from rayreach.sim.scene import Scene
 
 
 class CollisionChecker:

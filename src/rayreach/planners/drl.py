@@ -7,8 +7,10 @@ from typing import Any
 
 import numpy as np
 
+from rayreach.acting.config import ActingConfig
+from rayreach.acting.resample import ActingPolicy
+from rayreach.learning.policy import load_policy
 from rayreach.planners.base import ReactivePlanner
-from rayreach.policy import ActingPolicy, load_policy
 
 MODELS_DIR = Path(__file__).resolve().parents[3] / "models"
 """The repository's shipped policies (``models/ur5.zip``, ``models/kr16.zip``)."""
@@ -28,16 +30,16 @@ def shipped_model(robot: str) -> Path:
 
 
 class DRLPlanner(ReactivePlanner):
-    """The trained policy; ``acting_layers=False`` (planner ``drl-alone``) runs it without the
-    executor's final approach and safety layer, to measure the policy itself."""
+    """The trained policy acting through ``acting`` (``ActingConfig.off()``, planner
+    ``drl-alone``: the policy itself, as the paper's agent acted)."""
 
-    def __init__(self, model: str | Path, deterministic: bool = True, acting_layers: bool = True) -> None:
+    def __init__(self, model: str | Path, deterministic: bool = True, acting: ActingConfig = ActingConfig(),
+                 name: str = "drl") -> None:
         self.policy = load_policy(model)
         self.deterministic = deterministic
-        self.acting_layers = acting_layers
-        self.name = "drl" if acting_layers else "drl-alone"
-        # drawing anew where the arm is held is part of acting; the bare policy repeats its mean
-        self._acting = ActingPolicy(self.policy, deterministic=deterministic, resample=acting_layers)
+        self.acting = acting
+        self.name = name
+        self._acting = ActingPolicy(self.policy, deterministic=deterministic, resample=acting.resample)
 
     @property
     def robot(self) -> str:
@@ -46,11 +48,11 @@ class DRLPlanner(ReactivePlanner):
     def reset(self, seed: int) -> None:
         self._acting.reset(seed)
 
-    def act(self, observation: np.ndarray) -> np.ndarray:
-        return self._acting.act(observation)
+    def act(self, observation: np.ndarray, info: dict[str, Any]) -> np.ndarray:
+        return self._acting.act(observation, info)
 
     def config(self) -> dict[str, Any]:
         meta = self.policy.meta
         return {"planner": self.name, "model": str(self.policy.path), "deterministic": self.deterministic,
-                "resample_held": self._acting.draws_where_held,
+                "resample_held": self._acting.draws_where_held, "acting_layers": list(self.acting.layers),
                 "timesteps": meta.get("timesteps"), "git_commit": meta.get("git_commit")}

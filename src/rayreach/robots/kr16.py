@@ -48,6 +48,5 @@ KR16 = RobotSpec(
     workspace_high=(0.8, 0.8, 1.8),
     training_kinds=("shelf", "shelf", "shelf", "plate", "box", "sphere", "goal_wall"),  # the shelf in 3 of 7 draws
     tool_rpy=(math.pi, math.pi / 3.0, -math.pi / 2.0),  # the home pose: tool 30 deg below horizontal, +y
-    final_approach_radius=0.2,  # chosen from 0.1..0.3 m on random worlds (docs/training.md, "Acting")
     blind_links=("link_4", "link_5", "link_6"),
 )

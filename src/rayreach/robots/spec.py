@@ -94,18 +94,10 @@ class RobotSpec:
     """Largest end-effector translation per action, m (paper: 0.005 for both robots)."""
     rot_step: float = 0.005
     """Largest end-effector rotation per action, rad."""
-    final_approach_radius: float = 0.1
-    """Distance to the goal, m, within which the final approach may step straight at it
-    (``policy.FinalApproach``); the longer the straight path, the more the arm, which no ray
-    watches, moves (docs/training.md, "Acting")."""
-    final_approach_axial_radius: float | None = None
-    """Distance to the goal, m, within which the final approach may also step straight at
-    it along the tool's axis (``policy.FinalApproach.axial_radius``); None: only within
-    ``final_approach_radius``."""
     blind_links: tuple[str, ...] = ()
     """Arm links next to the tool that carry no rays and pass close to what the tool sees;
     the safety layer's arm rule keeps them clear of the points the rays hit
-    (``SafetyLayer.arm_clearance``, ``rayreach.arm_guard``)."""
+    (``SafetyLayer.arm_clearance``, ``rayreach.acting.arm_guard``)."""
 
     @property
     def n_joints(self) -> int:

@@ -57,5 +57,4 @@ UR5 = RobotSpec(
     workspace_low=(-0.4, 0.3, 0.2),
     workspace_high=(0.4, 0.7, 0.5),
     blind_links=("forearm_link", "wrist_1_link", "wrist_2_link", "wrist_3_link"),
-    final_approach_axial_radius=0.13,  # 0.13 and 0.15 m measured alike, 0.2 m worse (docs/training.md, "Acting")
 )

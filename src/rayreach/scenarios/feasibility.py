@@ -6,10 +6,10 @@ from typing import Iterator, Sequence
 
 import numpy as np
 
-from rayreach.kinematics import IKParams, Kinematics
+from rayreach.sim.kinematics import IKParams, Kinematics
 from rayreach.scenarios.schema import Scenario, ScenarioError
-from rayreach.scene import Scene
-from rayreach.transforms import rpy_to_matrix
+from rayreach.sim.scene import Scene
+from rayreach.sim.transforms import rpy_to_matrix
 
 REACH_TOLERANCE = 1e-4
 """IK position accuracy (m) for a start or goal to count as reachable."""

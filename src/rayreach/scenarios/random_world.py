@@ -12,11 +12,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rayreach.kinematics import IKParams, Kinematics
+from rayreach.sim.kinematics import IKParams, Kinematics
 from rayreach.scenarios.feasibility import goal_configuration
 from rayreach.scenarios.schema import ObstacleSpec, Scenario, StartSpec
-from rayreach.scene import Scene
-from rayreach.transforms import rpy_to_matrix
+from rayreach.sim.scene import Scene
+from rayreach.sim.transforms import rpy_to_matrix
 
 KINDS = ("plate", "moving_plate", "box", "sphere", "shelf", "goal_cover", "goal_wall", "goal_slot")
 """plate / moving_plate: upright or flat plates across the straight path (moving sideways);

@@ -2,7 +2,7 @@
 
 The paper's rays watch the tool and the wrist's two cones; the arm's wrist and forearm
 themselves are blind, and a KR16 wrist sweeping past a sphere the tool saw a moment earlier
-is most of what that robot still strikes (docs/training.md, "Acting"). ``SeenPoints``
+is most of what that robot still strikes (docs/acting.md). The acting layers' ray memory
 remembers where the rays hit over the last steps; ``ArmCapsules`` wraps the robot's
 ``blind_links`` in capsules fitted to their collision meshes and measures the seen points
 near them against the meshes; ``ArmGuard`` refuses a step that brings a link nearer than
@@ -14,15 +14,13 @@ data enters the rule, as for the rest of the safety layer.
 
 from __future__ import annotations
 
-from collections import deque
-
 import numpy as np
 import pybullet as p
 
-from rayreach.policy import distances_to_segment
+from rayreach.sim.geometry import distances_to_segment
 from rayreach.robots.urdf import TOOL_LINK
-from rayreach.scene import Scene
-from rayreach.voxels import cell_keys
+from rayreach.sim.scene import Scene
+from rayreach.sim.voxels import cell_keys
 
 VOXEL = 0.005
 """Seen points closer than this, m, are measured once (a static surface is hit again every step)."""
@@ -124,39 +122,17 @@ def _first_per_cell(points: np.ndarray) -> np.ndarray:
     return np.sort(first)
 
 
-class SeenPoints:
-    """Where the rays hit, in the world, over the last ``steps`` steps. Static obstacles stay
-    where they were seen; a moving one leaves a trail."""
-
-    def __init__(self, steps: int) -> None:
-        self._counts: deque[int] = deque(maxlen=int(steps))
-        self._points = np.zeros((0, 3))
-
-    def add(self, points: np.ndarray) -> None:
-        """Remember ``points`` (n, 3) as one step's hits, forgetting the oldest step's."""
-        if not self._counts.maxlen:
-            return
-        points = np.asarray(points, dtype=float).reshape(-1, 3)
-        oldest = self._counts[0] if len(self._counts) == self._counts.maxlen else 0
-        self._counts.append(len(points))
-        self._points = np.concatenate([self._points[oldest:], points])
-
-    def points(self) -> np.ndarray:
-        """The remembered points, oldest first, (n, 3)."""
-        return self._points
-
-
 class ArmGuard:
-    """The arm's rule for one episode (``SafetyLayer.arm_clearance``): remembers what the rays
-    hit and tells whether a joint step keeps the blind links clear of it, and the tool too
-    where ``links`` holds it (``TOOL_LINK``) and ``tool`` is set (``SafetyLayer.guard_tool``),
-    at ``tool_clearance`` (None: ``clearance``). Made where the scene's joints are at the start."""
+    """The arm's rule for one episode (``SafetyLayer.arm_clearance``): whether a joint step
+    keeps the blind links clear of the points the rays have seen (``RayMemory.seen_points``),
+    and the tool too where ``links`` holds it (``TOOL_LINK``) and ``tool`` is set
+    (``SafetyLayer.guard_tool``), at ``tool_clearance`` (None: ``clearance``). Made where the
+    scene's joints are at the start."""
 
-    def __init__(self, links: ArmCapsules, clearance: float, steps: int, tool: bool = False,
+    def __init__(self, links: ArmCapsules, clearance: float, tool: bool = False,
                  tool_clearance: float | None = None) -> None:
         self.scene = links.scene
         self.links = links
-        self.seen = SeenPoints(steps)
         arm = links.mask((TOOL_LINK,))
         only_tool = ~arm
         self._arm = [(arm, clearance)]
@@ -164,14 +140,13 @@ class ArmGuard:
                                        if tool and only_tool.any() else [])
         self._ends = self.links.world()  # where the last allowed step left the capsules
 
-    def allows(self, q_now: np.ndarray, q: np.ndarray, tool: bool = True) -> bool:
+    def allows(self, q_now: np.ndarray, q: np.ndarray, points: np.ndarray, tool: bool = True) -> bool:
         """Whether moving the joints from ``q_now`` (where the last allowed step left them)
-        to ``q`` keeps the arm links and the tool each their clearance from what the rays have
-        seen, or brings them no nearer than they are now; ``tool=False`` leaves the tool out
-        this step. Leaves the scene's joints at ``q`` or ``q_now``."""
+        to ``q`` keeps the arm links and the tool each their clearance from ``points`` (world,
+        m, (n, 3)), or brings them no nearer than they are now; ``tool=False`` leaves the
+        tool out this step. Leaves the scene's joints at ``q`` or ``q_now``."""
         self.scene.set_joints(q)
         ends = self.links.world()
-        points = self.seen.points()
         for use, clearance in self._with_tool if tool else self._arm:
             after = self.links.clearance(points, clearance, ends, use)
             if after < clearance:

@@ -10,11 +10,15 @@ its end-effector position) plus the workspace bounds; it never looks at the obst
 
 from __future__ import annotations
 
-from collections import deque
 from dataclasses import dataclass
-from typing import ClassVar
+from typing import TYPE_CHECKING, ClassVar, Sequence
 
 import numpy as np
+
+from rayreach.env.perception import Perception
+
+if TYPE_CHECKING:
+    from rayreach.acting.memory import Scan
 
 
 @dataclass(frozen=True)
@@ -39,19 +43,19 @@ class SafetyLayer:
     be, so the policy acts again from a new place; 0: off."""
     memory_steps: int = 0
     """The shield also holds off what the rays saw near in the last this many steps
-    (``HitMemory``): as the tool moves, an obstacle's edge passes between two rings of rays
+    (``remembered_rays``): as the tool moves, an obstacle's edge passes between two rings of rays
     and no ray sees what the next step strikes; 0: off."""
     arm_clearance: float = 0.0
     """Refuse a step (the arm holds still) that brings an arm link nearer than this, m, to a
     point the rays hit in the last ``arm_memory_steps`` steps, and nearer than the link is
-    now (``rayreach.arm_guard``): the arm's wrist and forearm carry no rays, and sweep into
+    now (``rayreach.acting.arm_guard``): the arm's wrist and forearm carry no rays, and sweep into
     what the tool saw moments before; 0: off."""
     arm_memory_steps: int = 100
     """How many steps of ray hits ``arm_clearance`` keeps; steps in which the arm held still
     do not count (it would forget what it is held off, and move into it)."""
     guard_tool: bool = False
     """The arm's rule watches the tool itself too, except on the final approach's steps
-    (``rayreach.policy.FinalApproach``), whose straight path is tested against every hit
+    (``rayreach.acting.final_approach.FinalApproach``), whose straight path is tested against every hit
     with the tool's shape already and may pass a wall nearer than ``arm_clearance``. A thin
     plate seen edge-on slips between the rays; a tool that saw it a few steps earlier swept
     its side into it (docs/training.md, "Acting")."""
@@ -82,7 +86,14 @@ class SafetyLayer:
     def filter(self, delta: np.ndarray, ee_pos: np.ndarray, low: np.ndarray, high: np.ndarray,
                ray_distances: np.ndarray, ray_directions: np.ndarray, travel: float | None = None,
                towards_goal: np.ndarray | None = None, keep_rotation: bool = False) -> np.ndarray:
-        """``delta`` (dx, dy, dz, rotation vector) as the arm may execute it. ``ray_distances``
+        """``shape``'s step alone."""
+        return self.shape(delta, ee_pos, low, high, ray_distances, ray_directions, travel, towards_goal,
+                          keep_rotation)[0]
+
+    def shape(self, delta: np.ndarray, ee_pos: np.ndarray, low: np.ndarray, high: np.ndarray,
+              ray_distances: np.ndarray, ray_directions: np.ndarray, travel: float | None = None,
+              towards_goal: np.ndarray | None = None, keep_rotation: bool = False) -> tuple[np.ndarray, bool]:
+        """(step, slid): ``delta`` (dx, dy, dz, rotation vector) as the arm may execute it. ``ray_distances``
         (m) and unit ``ray_directions`` are those of the current observation. ``travel``: how
         far, m, the motion goes in all when that is known (a straight path to the goal); if
         every ray sees farther than that, nothing seen can be reached and the shield lets
@@ -94,7 +105,7 @@ class SafetyLayer:
 
         Each rule is a half-space through the origin that the translation must lie in, so
         the translation kept is the nearest one to the commanded that lies in all of them
-        (``nearest_in_cone``)."""
+        (``nearest_in_cone``). ``slid``: the slide replaced the step by one towards the goal."""
         bounds = (ee_pos, low, high)
         near = ray_directions[self._near(ray_distances, travel)]
         out = np.array(delta, dtype=float)
@@ -102,7 +113,8 @@ class SafetyLayer:
             out[3:] = 0.0
         out[:3] = nearest_in_cone(out[:3], self._normals(float(np.linalg.norm(out[:3])), *bounds, near), self.TOLERANCE)
         least = self.slide * np.linalg.norm(delta[:3])
-        if self.slide > 0 and towards_goal is not None and np.linalg.norm(out[:3]) < least:
+        slid = bool(self.slide > 0 and towards_goal is not None and np.linalg.norm(out[:3]) < least)
+        if slid:
             size = float(np.linalg.norm(towards_goal))
             # the rules for the goal's step, once for both tries
             normals = self._normals(size, *bounds, ray_directions[self._near(ray_distances, None)])
@@ -112,7 +124,7 @@ class SafetyLayer:
                 way = nearest_direction_in_cone(towards_goal, normals, self.TOLERANCE)
                 if way is not None:
                     out[:3] = way * size
-        return out
+        return out, slid
 
     def allows(self, move: np.ndarray, ee_pos: np.ndarray, low: np.ndarray, high: np.ndarray,
                ray_distances: np.ndarray, ray_directions: np.ndarray, travel: float | None = None,
@@ -145,45 +157,43 @@ class SafetyLayer:
         return np.concatenate(normals)
 
 
-class HitMemory:
-    """The points the rays hit near the tool in the last ``steps`` steps, each with its ray's
-    origin relative to the end effector. Read back as rays from where those origins are now
-    (moved with the end effector), they give the shield what the rays saw and no longer see.
-    Static obstacles stay where they were seen; a moving one leaves a trail the shield
-    keeps clear of for ``steps`` steps."""
+MARGIN = 0.01
+"""Hits up to this much farther than the shield are remembered too, m: a step may bring
+them within it (``remembered_rays``)."""
 
-    MARGIN = 0.01
-    """Hits up to this much farther than the shield are remembered too, m: a step may bring
-    them within it."""
+LOST = 0.01
+"""A remembered point counts as out of sight when no ray hits within this of it now, m;
+points still in sight are the current rays' to hold off."""
 
-    LOST = 0.01
-    """A remembered point counts as out of sight when no ray hits within this of it now, m;
-    points still in sight are the current rays' to hold off."""
 
-    def __init__(self, steps: int) -> None:
-        self._seen: deque[tuple[np.ndarray, np.ndarray]] = deque(maxlen=int(steps))
+def near_hits(perception: Perception, reach: float) -> tuple[np.ndarray, np.ndarray]:
+    """The points one scan's rays hit within ``reach`` plus ``MARGIN`` (world, m) and their
+    rays' origins relative to the end effector then, (k, 3) each."""
+    hit = perception.lengths < reach + MARGIN
+    points = perception.origins[hit] + perception.directions[hit] * perception.lengths[hit, None]
+    return points, perception.origins[hit] - perception.ee_position
 
-    def rays(self, ee_pos: np.ndarray, origins: np.ndarray, directions: np.ndarray, distances: np.ndarray,
-             reach: float) -> tuple[np.ndarray, np.ndarray]:
-        """(distances, unit directions): the current rays, then one per remembered point that is
-        within ``reach`` of its ray's origin now and out of sight (``LOST``); then remembers
-        the current hits within ``reach`` plus ``MARGIN``."""
-        if not self._seen.maxlen:
-            return distances, directions
-        hit = distances < reach + self.MARGIN
-        now = origins[hit] + directions[hit] * distances[hit, None]
-        extra_distances, extra_directions = np.zeros(0), np.zeros((0, 3))
-        if self._seen:
-            points = np.concatenate([p for p, _ in self._seen])
-            towards = points - (ee_pos + np.concatenate([o for _, o in self._seen]))
-            size = np.linalg.norm(towards, axis=1)
-            near = np.flatnonzero((size < reach) & (size > 0))
-            if len(now) and len(near):  # only what no ray sees any more
-                gap = ((points[near, None] - now[None]) ** 2).sum(axis=2).min(axis=1)
-                near = near[gap > self.LOST ** 2]
-            extra_distances, extra_directions = size[near], towards[near] / size[near, None]
-        self._seen.append((now, origins[hit] - ee_pos))
-        return np.concatenate([distances, extra_distances]), np.concatenate([directions, extra_directions])
+
+def remembered_rays(now: Perception, before: Sequence[Scan], reach: float) -> tuple[np.ndarray, np.ndarray]:
+    """(distances, unit directions) for the shield: the current rays, then one per point the
+    rays hit in the scans ``before`` (``RayMemory.before``) that is within ``reach`` of its
+    ray's origin where that origin is now (moved with the end effector) and out of sight
+    (``LOST``). As the tool moves, an obstacle's edge passes between two rings of rays and no
+    ray sees what the next step strikes; static obstacles stay where they were seen, and a
+    moving one leaves a trail the shield keeps clear of."""
+    if not before:
+        return now.lengths, now.directions
+    seen = [scan.view(("shield", reach), lambda p: near_hits(p, reach)) for scan in before]
+    points = np.concatenate([p for p, _ in seen])
+    towards = points - (now.ee_position + np.concatenate([o for _, o in seen]))
+    size = np.linalg.norm(towards, axis=1)
+    near = np.flatnonzero((size < reach) & (size > 0))
+    in_sight = near_hits(now, reach)[0]
+    if len(in_sight) and len(near):  # only what no ray sees any more
+        gap = ((points[near, None] - in_sight[None]) ** 2).sum(axis=2).min(axis=1)
+        near = near[gap > LOST ** 2]
+    return (np.concatenate([now.lengths, size[near]]),
+            np.concatenate([now.directions, towards[near] / size[near, None]]))
 
 
 TIE = 1e-3

@@ -8,8 +8,8 @@ from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
 
-from rayreach.env import ReachEnv
-from rayreach.scene import RAY_BACKENDS
+from rayreach.env.reach import ReachEnv
+from rayreach.sim.scene import RAY_BACKENDS
 
 if TYPE_CHECKING:
     from rayreach.planners.collision import CollisionChecker
@@ -113,7 +113,7 @@ def bench_planners(scenario: str, runs: int, planners: Sequence[str], time_limit
     checker's configuration checks per second (in the start-goal sampling box)."""
     from tqdm import tqdm
 
-    from rayreach.execution import Executor
+    from rayreach.evaluate.executor import Executor
     from rayreach.planners import make_planner
     from rayreach.planners.collision import sampling_box
 

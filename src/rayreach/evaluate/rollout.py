@@ -2,22 +2,20 @@
 
 from __future__ import annotations
 
+from collections import Counter
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
 from tqdm import tqdm
 
-from rayreach.detour import Detour
-from rayreach.env import OUTCOMES, ReachEnv, episode_outcome
-from rayreach.policy import ActingPolicy, FinalApproach, load_policy
-from rayreach.safety import ACTING_SAFETY, SafetyLayer
+from rayreach.acting import ActingConfig, ActingEnv, ActingPolicy
+from rayreach.env.reach import OUTCOMES, ReachEnv
+from rayreach.env.episode import run_episode, share
+from rayreach.learning.policy import load_policy
 from rayreach.scenarios import RANDOM
+from rayreach.scenarios.splits import get_split
 from rayreach.scenarios.random_world import RandomWorldConfig, world_kinds
-
-EVAL_SEED_OFFSET = 1_000_000
-"""Random-world rollouts draw seeds from here on; training uses seeds below it."""
-
 
 @dataclass
 class RolloutSummary:
@@ -30,11 +28,13 @@ class RolloutSummary:
     successes: int
     collisions: int
     deterministic: bool
-    final_approach: bool
-    detour: bool
-    resample: bool
-    """Whether a held arm's repeated observation drew its action (``ActingPolicy``)."""
+    acting_layers: list[str]
+    """The acting layers that were on (``rayreach.acting.LAYERS``)."""
+    acting_share: dict[str, float]
+    """The share of all steps by what chose the executed motion (``info["acting"]["source"]``)."""
     safety: dict[str, float]
+    split: str | None = None
+    """Random worlds: the seed split they were drawn from."""
     outcomes: dict[str, int] = field(default_factory=dict)
     """Episodes per outcome: success, collision, out_of_bounds, timeout."""
     by_kind: dict[str, dict[str, int]] = field(default_factory=dict)
@@ -60,43 +60,43 @@ def rollout(
     deterministic: bool = True,
     goal_tolerance: float = 0.01,
     n_obstacles: int | None = None,
-    seed: int = EVAL_SEED_OFFSET,
+    seed: int | None = None,
     progress: bool = True,
-    final_approach: FinalApproach | None = FinalApproach(),
-    safety: SafetyLayer = ACTING_SAFETY,
-    resample: bool = True,
-    detour: Detour | None = Detour(),
+    acting: ActingConfig = ActingConfig(),
     start_clearance: float = 0.0,
+    split: str = "validation",
 ) -> RolloutSummary:
-    """``episodes`` episodes of the policy at ``goal_tolerance``. Random worlds use the
-    final obstacle count of training unless ``n_obstacles`` is given, and keep the robot's
-    start ``start_clearance`` from every obstacle (``RandomWorldConfig.start_clearance``).
-    ``final_approach`` and ``detour`` None, ``SafetyLayer()`` and ``resample`` False measure
-    the policy alone."""
+    """``episodes`` episodes of the policy at ``goal_tolerance``, acting through ``acting``
+    (``ActingConfig.off()``: the policy alone). Random worlds come from seed ``split`` (from
+    ``seed`` on, which must lie in it; default: the split's first), use the final obstacle
+    count of training unless ``n_obstacles`` is given, and keep the robot's start
+    ``start_clearance`` from every obstacle (``RandomWorldConfig.start_clearance``)."""
+    random = scenario == RANDOM
+    chosen = get_split(split)
+    first = chosen.start if seed is None else int(seed)
+    if random and not (first in chosen and first + episodes - 1 in chosen):
+        raise ValueError(f"seeds {first}..{first + episodes - 1} leave the {split} split "
+                         f"({chosen.start}..{chosen.stop - 1})")
     policy = load_policy(model)
-    acting = ActingPolicy(policy, deterministic=deterministic, resample=resample)
-    env = ReachEnv(robot=policy.robot, scenario=scenario, goal_tolerance=goal_tolerance,
-                   safety=safety, final_approach=final_approach, detour=detour,
-                   random_world=RandomWorldConfig(start_clearance=start_clearance))
-    if scenario == RANDOM:
+    agent = ActingPolicy(policy, deterministic=deterministic, resample=acting.resample)
+    base = ReachEnv(robot=policy.robot, scenario=scenario, goal_tolerance=goal_tolerance,
+                    random_world=RandomWorldConfig(start_clearance=start_clearance))
+    env = ActingEnv(base, acting)
+    if random:
         trained = policy.meta.get("state", {}).get("obstacles", {}).get("count", 0)
-        env.set_n_obstacles(trained if n_obstacles is None else n_obstacles)
-    records = []
+        base.set_n_obstacles(trained if n_obstacles is None else n_obstacles)
+    records, sources = [], Counter()
     try:
         for episode in tqdm(range(episodes), desc=f"rollout {scenario}", disable=not progress, leave=False):
-            obs, info = env.reset(seed=seed + episode)
-            acting.reset(seed + episode)
-            path = [info["ee_position"]]
-            done = False
-            while not done:
-                obs, _, terminated, truncated, info = env.step(acting.act(obs))
-                path.append(info["ee_position"])
-                done = terminated or truncated
-            length = float(np.linalg.norm(np.diff(np.asarray(path), axis=0), axis=1).sum())
+            agent.reset(first + episode)
+            run = run_episode(env, agent.act, first + episode)
+            sources.update(run.sources)
+            info = run.info
             records.append({"success": bool(info["is_success"]), "collision": bool(info["collision"]),
-                            "out_of_bounds": bool(info["out_of_bounds"]), "outcome": episode_outcome(info),
-                            "steps": len(path) - 1, "path_length": length,
-                            "kinds": world_kinds(env.scenario) if scenario == RANDOM else []})
+                            "out_of_bounds": bool(info["out_of_bounds"]), "outcome": run.outcome,
+                            "steps": run.steps, "path_length": run.path_length, "seed": first + episode,
+                            "acting_share": run.acting_share,
+                            "kinds": world_kinds(base.scenario) if random else []})
     finally:
         env.close()
     successes = sum(r["success"] for r in records)
@@ -111,10 +111,10 @@ def rollout(
         successes=successes,
         collisions=collisions,
         deterministic=deterministic,
-        final_approach=final_approach is not None,
-        detour=detour is not None,
-        resample=acting.draws_where_held,
-        safety=asdict(safety),
+        acting_layers=list(acting.layers),
+        acting_share=share(sources),
+        safety=asdict(acting.safety),
+        split=split if random else None,
         outcomes=_count(records),
         by_kind={kind: {"episodes": sum(kind in r["kinds"] for r in records),
                         **_count([r for r in records if kind in r["kinds"]])}

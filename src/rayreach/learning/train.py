@@ -19,9 +19,9 @@ from typing import Any
 
 import numpy as np
 
-from rayreach.curriculum import AugmentedGoalSize, GoalSizeParams, ObstacleCurriculum, ObstacleParams
-from rayreach.policy import CheckpointError, read_bundle_meta, restore_normalization, save_bundle
-from rayreach.rewards import RewardWeights
+from rayreach.learning.curriculum import AugmentedGoalSize, GoalSizeParams, ObstacleCurriculum, ObstacleParams
+from rayreach.learning.bundles import CheckpointError, read_bundle_meta, restore_normalization, save_bundle
+from rayreach.env.rewards import RewardWeights
 
 CHECKPOINT = "checkpoint.zip"
 MODEL = "model.zip"
@@ -80,10 +80,12 @@ class TrainConfig:
     """Share of episodes played at the true goal size rho_min while the curriculum enlarges
     the goal (not in the paper; docs/training.md). They do not feed the goal-size curriculum."""
     acting_layers: bool = False
-    """Play training episodes with the final approach and the safety layer the planner acts
-    with (not in the paper; docs/training.md, "Training as it acts"): collisions and exits
-    the layer would stop become waits, which the policy must learn to go around. Not with
-    the detour: its steps, up to hundreds in a row, are not the policy's to learn from."""
+    """Play training episodes through the acting layers that reshape or refuse the policy's
+    own step (``rayreach.acting.ActingConfig.training``: shield, workspace guard, arm's rule;
+    not in the paper): collisions and exits the layers would stop become waits, which the
+    policy must learn to go around. The layers that replace its action outright (final
+    approach, detour, slide) stay out: PPO would store an action that had no effect on what
+    followed (docs/acting.md, "Training with the layers")."""
     checkpoint_every: int = 100_000
     goal: GoalSizeParams = field(default_factory=GoalSizeParams)
     obstacles: ObstacleParams = field(default_factory=ObstacleParams)
@@ -97,9 +99,7 @@ def make_env_fn(config: TrainConfig, rank: int):
     def build():
         from stable_baselines3.common.monitor import Monitor
 
-        from rayreach.env import EnvConfig, ReachEnv
-        from rayreach.policy import FinalApproach
-        from rayreach.safety import ACTING_SAFETY, SafetyLayer
+        from rayreach.env.reach import EnvConfig, ReachEnv
         from rayreach.scenarios.random_world import RandomWorldConfig
 
         env_config = EnvConfig(
@@ -110,10 +110,12 @@ def make_env_fn(config: TrainConfig, rank: int):
             rewards=replace(RewardWeights(), progress=config.progress_weight, proximity=config.proximity_weight,
                             shielded=config.shield_weight),
             random_world=RandomWorldConfig(n_obstacles=config.obstacles.start),
-            final_approach=FinalApproach() if config.acting_layers else None,
-            safety=ACTING_SAFETY if config.acting_layers else SafetyLayer(),
         )
         env = ReachEnv(robot=config.robot, scenario="random", config=env_config)
+        if config.acting_layers:
+            from rayreach.acting import ActingConfig, ActingEnv
+
+            env = ActingEnv(env, ActingConfig.training())
         env.reset(seed=config.seed * 10_000 + rank)
         return Monitor(env, info_keywords=("is_success",))
 
@@ -123,7 +125,7 @@ def make_env_fn(config: TrainConfig, rank: int):
 def build_vec_env(config: TrainConfig):
     from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 
-    from rayreach.vec_env import WorkerVecEnv
+    from rayreach.learning.vec_env import WorkerVecEnv
 
     fns = [make_env_fn(config, i) for i in range(config.envs)]
     venv = DummyVecEnv(fns) if config.workers <= 1 else WorkerVecEnv(fns, config.workers)
@@ -248,7 +250,7 @@ def _make_callback(config: TrainConfig, state: TrainState, out: Path, total: int
     from stable_baselines3.common.callbacks import BaseCallback
     from tqdm import tqdm
 
-    from rayreach.env import OUTCOMES, episode_outcome
+    from rayreach.env.reach import OUTCOMES, episode_outcome
 
     threads = update_threads(config, torch.get_num_threads())
 
@@ -385,7 +387,7 @@ def git_commit() -> str:
 
 
 def bundle_meta(config: TrainConfig, state: TrainState, steps: int, kind: str) -> dict[str, Any]:
-    from rayreach.env import OBS_SIZE
+    from rayreach.env.reach import OBS_SIZE
 
     return {
         "kind": kind,
@@ -502,7 +504,7 @@ def plot_curve(csv_path: Path, png_path: Path, title: str) -> Path | None:
     import matplotlib
 
     matplotlib.use("Agg")
-    from rayreach.env import OUTCOMES
+    from rayreach.env.reach import OUTCOMES
     import matplotlib.pyplot as plt
 
     with csv_path.open() as handle:

@@ -16,12 +16,12 @@ from typing import Iterator, Sequence
 import numpy as np
 import pybullet as p
 
-from rayreach.quiet import c_stdout_suppressed
+from rayreach.sim.quiet import c_stdout_suppressed
 from rayreach.robots.spec import RobotSpec
 from rayreach.robots.urdf import TCP_LINK, resolved_urdf
 from rayreach.scenarios.schema import ObstacleSpec
-from rayreach.sensors import BulletCaster, NumpyCaster, PrimitiveSet, RayCaster
-from rayreach.transforms import rpy_to_matrix
+from rayreach.sim.sensors import BulletCaster, NumpyCaster, PrimitiveSet, RayCaster
+from rayreach.sim.transforms import rpy_to_matrix
 
 ROBOT_GROUP = 2
 OBSTACLE_GROUP = 1

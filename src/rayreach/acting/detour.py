@@ -2,7 +2,7 @@
 
 A policy that hovers beside an obstacle it cannot cross (a goal slot under the workspace's
 ceiling, a plate across its path) repeats itself until its step budget runs out
-(docs/training.md, "Acting"). ``Detour`` then plans a path for the tool's tip through a grid
+(docs/acting.md). ``Detour`` then plans a path for the tool's tip through a grid
 over the workspace, keeping the tool, at its present orientation, clear of every point the
 rays have hit in the episode, and treating what no ray has seen as free: a bug algorithm's
 optimism, corrected as the rays see more. It steps along that path, replanning every few
@@ -17,9 +17,10 @@ from typing import ClassVar, Sequence
 
 import numpy as np
 
-from rayreach.policy import stalled
-from rayreach.safety import SafetyLayer
-from rayreach.voxels import cell_keys
+from rayreach.acting.final_approach import stalled
+from rayreach.acting.memory import RayMemory
+from rayreach.acting.shield import SafetyLayer
+from rayreach.sim.voxels import cell_keys
 
 VOXEL = 0.01
 """Hits are remembered once per cell of this size, m (a static surface is hit every step)."""
@@ -56,7 +57,7 @@ class Detour:
         """The safety layer for the detour's steps: ``layer`` with its ray shield narrowed to
         the clearance. The path keeps that far from everything seen; a 5 cm shield held a
         tool following a 3 cm path off the slot plates the path passes, and the detour gave
-        up (docs/training.md, "Acting"). What the shield still stops is what the plan did not
+        up (docs/acting.md). What the shield still stops is what the plan did not
         know: something seen nearer than the clearance since."""
         return replace(layer, ray_shield=min(layer.ray_shield, self.clearance))
 
@@ -86,9 +87,11 @@ class DetourState:
     """The path starts from a free cell at most this far from the tool, m (the shield may
     hold the tool within the clearance of what it sees)."""
 
-    def __init__(self, detour: Detour, tool_length: float, tool_radius: float, arrive: float,
+    def __init__(self, detour: Detour, memory: RayMemory, tool_length: float, tool_radius: float, arrive: float,
                  ray_range: float, low: np.ndarray, high: np.ndarray) -> None:
         self.detour = detour
+        self.memory = memory
+        """The episode's ray memory: every scan is taken in when a plan needs it (most runs never stall)."""
         self.tool_length = tool_length
         self.tool_radius = tool_radius
         self.arrive = arrive
@@ -98,24 +101,19 @@ class DetourState:
         """The box the tip's path stays in, m."""
         self._keys = np.zeros(0, dtype=np.int64)
         self._points = np.zeros((0, 3))
-        self._pending: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+        self._taken = 0  # scans of the memory taken in so far
         self._path: np.ndarray | None = None
         self._planned_at = 0
         self._since = 0  # the step from which a stall counts
         self._last: np.ndarray | None = None  # where the last detour step started
         self._held = 0
 
-    def see(self, origins: np.ndarray, directions: np.ndarray, lengths: np.ndarray) -> None:
-        """Take in one step's rays (origins and unit directions, (n, 3); how far each saw, m,
-        ``ray_range`` where it saw nothing). Kept as they come and taken in when a plan needs
-        them: most runs never stall."""
-        self._pending.append((np.array(origins, float), np.array(directions, float), np.array(lengths, float)))
-
     def seen(self) -> np.ndarray:
-        """Every remembered hit, (n, 3): each step's rays, in turn, forget the hits they now
+        """Every remembered hit, (n, 3): each scan's rays, in turn, forget the hits they now
         pass through (a moving plate's trail, a goal cover gone) and add what they hit, once
         per ``VOXEL``."""
-        for origins, directions, lengths in self._pending:
+        for scan in self.memory.scans[self._taken:]:
+            origins, directions, lengths = scan.perception.origins, scan.perception.directions, scan.perception.lengths
             if len(self._points):
                 p = self._points
                 along = directions @ p.T - np.sum(origins * directions, axis=1)[:, None]
@@ -131,7 +129,7 @@ class DetourState:
                 new = ~np.isin(keys, self._keys)
                 self._points = np.concatenate([self._points, points[first[new]]])
                 self._keys = np.concatenate([self._keys, keys[new]])
-        self._pending.clear()
+        self._taken = len(self.memory.scans)
         return self._points
 
     @property

@@ -34,7 +34,7 @@ from typing import Protocol
 import numpy as np
 
 from rayreach.robots.spec import RobotSpec, SensorMount
-from rayreach.transforms import pose_matrix, rpy_to_matrix
+from rayreach.sim.transforms import pose_matrix, rpy_to_matrix
 
 RAY_RANGE = 0.4
 """Sensor range in metres (paper: 0.4 m for every sensor)."""

@@ -4,7 +4,8 @@ A run starts from the scenario's start configuration at t = 0. A global planner 
 scene as it is at t = 0 (obstacles frozen), then its joint path is timed: each control period
 (``EnvConfig.control_period``) the arm moves its end effector at most ``ee_step`` (0.005 m)
 along each axis, the DRL action's bound, and at most ``velocity * period`` in every joint. A reactive
-planner acts once per control period through :class:`~rayreach.env.ReachEnv`. Either way the
+planner acts once per control period through :class:`~rayreach.env.reach.ReachEnv`, wrapped
+in the acting layers it asks for (``ReactivePlanner.acting``, ``rayreach.acting``). Either way the
 arm is checked for collision at every control step against the obstacles where they are at
 that time. Definitions of the recorded metrics: ``docs/metrics.md``.
 """
@@ -13,20 +14,18 @@ from __future__ import annotations
 
 import math
 import time
-from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any
 
 import numpy as np
 
-from rayreach.detour import Detour
-from rayreach.env import ReachEnv, episode_outcome
-from rayreach.kinematics import Kinematics
+from rayreach.acting import ActingConfig, ActingEnv
+from rayreach.env.reach import ReachEnv
+from rayreach.env.episode import run_episode
+from rayreach.sim.kinematics import Kinematics
 from rayreach.planners import GlobalPlanner, PlanResult, ReactivePlanner, Status
 from rayreach.planners.collision import CollisionChecker
-from rayreach.policy import FinalApproach
-from rayreach.safety import ACTING_SAFETY, SafetyLayer
 from rayreach.scenarios import Scenario
 from rayreach.scenarios.feasibility import goal_solutions
 
@@ -42,15 +41,6 @@ class ExecutionConfig:
     lookahead: int = 24
     """Control steps of the remaining path checked each step in replanning mode (0.1 s)."""
     max_replans: int = 10
-    safety: SafetyLayer = ACTING_SAFETY
-    """What the controller does to a reactive planner's actions (``rayreach.safety``);
-    ``SafetyLayer()``: the actions as they are."""
-    final_approach: FinalApproach | None = FinalApproach()
-    """The straight step at a goal a reactive planner has nearly reached
-    (``rayreach.policy.FinalApproach``); None: the planner's actions to the end."""
-    detour: Detour | None = Detour()
-    """The way round what the rays see for a reactive planner that has stalled
-    (``rayreach.detour.Detour``); None: never."""
 
 
 @dataclass
@@ -79,13 +69,17 @@ class RunRecord:
     replans: int = 0
     message: str = ""
     config: dict[str, Any] = field(default_factory=dict)
+    acting_share: dict[str, float] = field(default_factory=dict)
+    """Reactive planners: the share of steps by what chose the executed motion (``policy``,
+    ``final_approach``, ``detour``, ...; ``held``: the arm held still), summing to 1; empty
+    for global planners (``rayreach.acting``)."""
     ee_path: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     joint_path: np.ndarray = field(default_factory=lambda: np.zeros((0, 6)))
 
     def summary(self) -> dict[str, Any]:
         """The scalar fields (no trajectories, no config)."""
         data = asdict(self)
-        for key in ("ee_path", "joint_path", "config"):
+        for key in ("ee_path", "joint_path", "config", "acting_share"):
             data.pop(key)
         return data
 
@@ -123,13 +117,19 @@ class Executor:
     def __init__(self, scenario: str | Path | Scenario, robot: str | None = None,
                  config: ExecutionConfig = ExecutionConfig()) -> None:
         self.config = config
-        self.env = ReachEnv(robot=robot, scenario=scenario, goal_tolerance=config.goal_tolerance,
-                            safety=config.safety, final_approach=config.final_approach, detour=config.detour)
+        self.env = ReachEnv(robot=robot, scenario=scenario, goal_tolerance=config.goal_tolerance)
         self.kin = self.env.kin
         self.scene = self.env.scene
         self.checker = CollisionChecker(self.scene)
         self.spec = self.env.spec_robot
         self.period = self.env.config.control_period
+        self._acting: dict[ActingConfig, ActingEnv] = {}
+
+    def acting_env(self, config: ActingConfig) -> ActingEnv:
+        """The scene's environment acting through ``config``, made once per configuration."""
+        if config not in self._acting:
+            self._acting[config] = ActingEnv(self.env, config)
+        return self._acting[config]
 
     @property
     def robot(self) -> str:
@@ -181,30 +181,13 @@ class Executor:
             return self._run_reactive(planner, seed)
         return self._run_global(planner, seed)
 
-    def _acting(self) -> dict[str, Any]:
+    @staticmethod
+    def _acting_record(env: ActingEnv) -> dict[str, Any]:
         """What acted between a reactive planner and the arm, for its run records."""
-        approach = self.env.final_approach
-        detour = self.env.config.detour
-        return {"safety": asdict(self.env.config.safety),
+        config, approach = env.config, env.final_approach
+        return {"safety": asdict(config.safety),
                 "final_approach": asdict(approach) if approach is not None else None,
-                "detour": asdict(detour) if detour is not None else None}
-
-    @contextmanager
-    def _layers(self, on: bool) -> Iterator[None]:
-        """The final approach, detour and safety layer of ``config`` on, or off for this run."""
-        if on:
-            yield
-            return
-        env = self.env
-        env.set_final_approach(None)
-        env.set_detour(None)
-        env.set_safety(SafetyLayer())
-        try:
-            yield
-        finally:
-            env.set_final_approach(self.config.final_approach)
-            env.set_detour(self.config.detour)
-            env.set_safety(self.config.safety)
+                "detour": asdict(config.detour) if config.detour is not None else None}
 
     def _record(self, planner, seed: int, **values: Any) -> RunRecord:
         values.setdefault("config", planner.config())
@@ -213,34 +196,18 @@ class Executor:
                          seed=seed, **values)
 
     def _run_reactive(self, planner: ReactivePlanner, seed: int) -> RunRecord:
-        with self._layers(planner.acting_layers):
-            return self._run_reactive_steps(planner, seed)
-
-    def _run_reactive_steps(self, planner: ReactivePlanner, seed: int) -> RunRecord:
-        env = self.env
-        obs, info = env.reset(seed=seed)
+        env = self.acting_env(planner.acting)
         planner.reset(seed)
-        ee, joints = [info["ee_position"]], [env.q.copy()]
-        compute = 0.0
-        done = False
-        while not done:
-            t0 = time.perf_counter()
-            action = planner.act(obs)
-            obs, _, terminated, truncated, info = env.step(action)
-            compute += time.perf_counter() - t0
-            ee.append(info["ee_position"])
-            joints.append(env.q.copy())
-            done = terminated or truncated
-        outcome = episode_outcome(info).replace("_", " ")
-        ee_path = np.asarray(ee)
-        length = polyline_length(ee_path)
-        return self._record(planner, seed, config={**planner.config(), **self._acting()},
-                            outcome=outcome, plan_status=Status.SOLVED.value,
+        episode = run_episode(env, planner.act, seed)
+        info = episode.info
+        length = episode.path_length
+        return self._record(planner, seed, config={**planner.config(), **self._acting_record(env)},
+                            outcome=episode.outcome.replace("_", " "), plan_status=Status.SOLVED.value,
                             success=bool(info["is_success"]), collision=bool(info["collision"]),
                             path_length=length, path_length_unsmoothed=length,
-                            joint_path_length=polyline_length(np.asarray(joints)), planning_time=compute,
-                            motion_time=env.steps * self.period, steps=env.steps, ee_path=ee_path,
-                            joint_path=np.asarray(joints))
+                            joint_path_length=polyline_length(episode.joint_path), planning_time=episode.compute_time,
+                            motion_time=episode.steps * self.period, steps=episode.steps, ee_path=episode.ee_path,
+                            joint_path=episode.joint_path, acting_share=episode.acting_share)
 
     def _plan(self, planner: GlobalPlanner, waypoints: list[np.ndarray], rng: np.random.Generator
               ) -> tuple[list[np.ndarray] | None, list[np.ndarray] | None, PlanResult]:

@@ -21,9 +21,13 @@ from typing import Any, Callable, Protocol
 import numpy as np
 from tqdm import tqdm
 
-from rayreach.policy import CheckpointError, FinalApproach, Normalization, Policy, read_bundle_meta, save_bundle
-from rayreach.train import CHECKPOINT
-from rayreach.transforms import rpy_to_matrix
+from rayreach.learning.bundles import CheckpointError, Normalization, read_bundle_meta, save_bundle
+
+
+from rayreach.learning.policy import Policy
+from rayreach.env.episode import run_episode
+from rayreach.learning.train import CHECKPOINT
+from rayreach.sim.transforms import rpy_to_matrix
 
 
 def report_name(kind: str) -> str:
@@ -178,32 +182,41 @@ class CloneConfig:
 
 
 def _world_env(robot: str, n_obstacles: int, kinds: tuple[str, ...], goal_tolerance: float):
-    from rayreach.env import EnvConfig, ReachEnv
+    """A random-world environment of ``kinds``: the paper's, for the expert and the DAgger rounds."""
+    from rayreach.env.reach import ReachEnv
     from rayreach.scenarios.random_world import RandomWorldConfig
 
-    # episodes are played as the DRL planner acts: with the final approach, without the executor's safety layer
-    config = EnvConfig(goal_tolerance=goal_tolerance, random_world=RandomWorldConfig(n_obstacles=n_obstacles, kinds=kinds),
-                       final_approach=FinalApproach())
-    return ReachEnv(robot=robot, scenario="random", config=config)
+    return ReachEnv(robot=robot, scenario="random", goal_tolerance=goal_tolerance,
+                    random_world=RandomWorldConfig(n_obstacles=n_obstacles, kinds=kinds))
+
+
+def _acting(env):
+    """``env`` as the DRL planner acted when the shipped demonstrations were cloned: with the
+    final approach, without the other layers."""
+    from rayreach.acting import LAYERS, ActingConfig, ActingEnv
+
+    return ActingEnv(env, ActingConfig().without(*(layer for layer in LAYERS if layer != "final_approach")))
 
 
 def _play(env, act: Callable[[np.ndarray], np.ndarray], label: Callable[[np.ndarray, Any], np.ndarray] | None,
           episodes: int, seed: int, desc: str, progress: bool, accepts: Callable[[Any], bool] = lambda env: True,
           ) -> tuple[list[np.ndarray], list[np.ndarray], dict[str, float]]:
     """Play ``episodes`` in worlds that ``accepts``, acting with ``act``; record raw
-    observations and ``label(obs, env)``."""
+    observations and ``label(obs, env)`` (``accepts`` and ``label`` see the paper's
+    environment, inside any acting wrapper)."""
     observations, labels, outcomes = [], [], {"success": 0, "collision": 0}
+    base = env.unwrapped
+
+    def record(obs: np.ndarray, _env: Any) -> None:
+        if label is not None:
+            observations.append(obs)
+            labels.append(label(obs, base))
+
     for episode in tqdm(range(episodes), desc=desc, disable=not progress, leave=False):
-        obs, _ = env.reset(seed=seed + episode)
-        while not accepts(env):
-            obs, _ = env.reset()
-        done = False
-        while not done:
-            if label is not None:
-                observations.append(obs)
-                labels.append(label(obs, env))
-            obs, _, terminated, truncated, info = env.step(act(obs))
-            done = terminated or truncated
+        start = env.reset(seed=seed + episode)
+        while not accepts(base):
+            start = env.reset()
+        info = run_episode(env, lambda obs, _info: act(obs), on_step=record, start=start).info
         outcomes["success"] += bool(info["is_success"])
         outcomes["collision"] += bool(info["collision"])
     return observations, labels, {k: v / max(episodes, 1) for k, v in outcomes.items()}
@@ -248,21 +261,21 @@ def clone_into_checkpoint(run: str | Path, kind: str, config: CloneConfig = Clon
     goal_size = float(meta["state"]["goal"]["size"])
     others = tuple(k for k in spec.training_kinds if k != kind)
     anchor_tolerance = goal_size if config.anchor_tolerance is None else config.anchor_tolerance
-    anchor_env = _world_env(robot, n_obstacles, others, anchor_tolerance)
+    anchor_env = _acting(_world_env(robot, n_obstacles, others, anchor_tolerance))
     expert_env = _world_env(robot, 1, (kind,), float(meta["config"]["goal"]["rho_min"]))  # the true task
+    acting_expert_env = _acting(expert_env)
     try:
         anchor_obs, _, anchor_before = _play(anchor_env, actor.act, lambda o, e: o, config.anchor_episodes,
                                              config.seed + 10_000, "anchor", progress)
         with torch.no_grad():
             anchor_labels = [actor_mean(np.asarray(anchor_obs)).numpy()] if anchor_obs else []
-        expert_before = _play(expert_env, actor.act, None, config.eval_episodes, config.seed + 20_000, "before",
+        expert_before = _play(acting_expert_env, actor.act, None, config.eval_episodes, config.seed + 20_000, "before",
                               progress, expert.accepts)[2]
         expert_obs: list[np.ndarray] = []
         expert_labels: list[np.ndarray] = []
         optimiser = torch.optim.Adam(policy.parameters(), lr=config.learning_rate)
         rounds = []
-        acting = expert_env.config.final_approach
-        expert_env.set_final_approach(None)  # the DAgger rounds follow the expert or the actor alone
+        # the DAgger rounds follow the expert or the actor alone, in the paper's environment
         for r in range(config.rounds):
             follow = (lambda o: expert.label(o, expert_env)) if r == 0 else actor.act
             obs, labels, outcome = _play(expert_env, follow, expert.label, config.episodes,
@@ -274,8 +287,7 @@ def clone_into_checkpoint(run: str | Path, kind: str, config: CloneConfig = Clon
             loss = _fit(policy, optimiser, x, y, config.epochs, config.batch_size)
             rounds.append({"round": r + 1, "followed": "expert" if r == 0 else "cloned actor",
                            "success_rate": outcome["success"], "samples": len(y), "loss": loss})
-        expert_env.set_final_approach(acting)
-        expert_after = _play(expert_env, actor.act, None, config.eval_episodes, config.seed + 20_000, "after",
+        expert_after = _play(acting_expert_env, actor.act, None, config.eval_episodes, config.seed + 20_000, "after",
                              progress, expert.accepts)[2]
         _, _, anchor_after = _play(anchor_env, actor.act, None, config.anchor_episodes, config.seed + 10_000,
                                    "anchor after", progress)

@@ -7,11 +7,11 @@ from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
 
-from rayreach.env import ReachEnv, camera_for
-from rayreach.scene import project_points
+from rayreach.env.reach import ReachEnv, camera_for
+from rayreach.sim.scene import project_points
 
 if TYPE_CHECKING:
-    from rayreach.execution import Executor, RunRecord
+    from rayreach.evaluate.executor import Executor, RunRecord
 
 HIT_COLOR = "#e8322b"
 FREE_COLOR = "#2bb24c"

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from rayreach.robots.spec import RobotSpec
-from rayreach.transforms import matrix_to_rotvec, pose_matrix, rpy_to_matrix
+from rayreach.sim.transforms import matrix_to_rotvec, pose_matrix, rpy_to_matrix
 
 
 @dataclass(frozen=True)

@@ -7,8 +7,9 @@ from pathlib import Path
 
 import numpy as np
 
-from rayreach.env import ReachEnv
-from rayreach.render import draw_scene
+from rayreach.env.episode import run_episode
+from rayreach.env.reach import ReachEnv
+from rayreach.evaluate.render import draw_scene
 
 
 def scripted_actions(env: ReachEnv, clearance_z: float) -> list[np.ndarray]:
@@ -43,18 +44,12 @@ def scripted_episode(scenario: str, out_dir: str | Path, clearance_z: float = 0.
     env = ReachEnv(scenario=scenario)
     try:
         env.reset(seed=0)
-        path = [env.ee_pos.copy()]
-        total, info = 0.0, {}
-        for action in scripted_actions(env, clearance_z):
-            _, reward, terminated, truncated, info = env.step(action)
-            total += reward
-            path.append(info["ee_position"])
-            if terminated or truncated:
-                break
+        actions = iter(scripted_actions(env, clearance_z))
+        episode = run_episode(env, lambda obs, info: next(actions, None), seed=0)
+        path, info, total = episode.ee_path, episode.info, episode.total_reward
         picture = draw_scene(env, Path(out_dir) / f"{scenario}-scripted.png", trajectory=path,
                              title=f"{scenario}: scripted episode, {len(path) - 1} steps")
-        lengths = np.linalg.norm(np.diff(np.asarray(path), axis=0), axis=1)
-        return EpisodeSummary(len(path) - 1, bool(info.get("is_success")), bool(info.get("collision")),
-                              float(lengths.sum()), total, picture)
+        return EpisodeSummary(episode.steps, bool(info.get("is_success")), bool(info.get("collision")),
+                              episode.path_length, total, picture)
     finally:
         env.close()

@@ -1,0 +1,1 @@
+"""Training the policy: PPO, curricula, demonstrations, and the bundles a policy is saved in."""

@@ -1,0 +1,51 @@
+"""Shipping a run's policy: the bundle copied with its metadata beside it."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from rayreach.learning.bundles import CheckpointError, _json_default, read_bundle_meta
+
+
+def train_command(config: dict, out: str | Path) -> str:
+    """The ``rayreach train`` command line a run's saved configuration stands for, with the
+    flags that stay on through ``--resume`` (acting layers, a fixed obstacle count); flags
+    given to one part only (``--freeze-features``, ``--critic-warmup``) are not saved."""
+    command = (f"rayreach train --robot {config['robot']} --timesteps {config['timesteps']} --envs {config['envs']} "
+               f"--out {out} --checkpoint-every {config['checkpoint_every']}")
+    if config.get("acting_layers"):
+        command += " --acting-layers"
+    obstacles = config.get("obstacles", {})
+    if obstacles and obstacles["minimum"] == obstacles["maximum"] == obstacles["start"]:
+        command += f" --obstacles {obstacles['start']}"
+    return command + " [--resume]"
+
+
+def export_bundle(source: str | Path, target: str | Path) -> tuple[Path, Path]:
+    """Copy a run's model (or its latest checkpoint) to ``target`` and write the metadata
+    beside it as ``target`` with a .json suffix: what a shipped policy carries."""
+    import shutil
+
+    source, target = Path(source), Path(target)
+    if source.is_dir():
+        candidates = [source / "model.zip", source / "checkpoint.zip"]
+        found = [c for c in candidates if c.exists()]
+        if not found:
+            raise CheckpointError(f"{source} holds neither model.zip nor checkpoint.zip")
+        source = max(found, key=lambda c: read_bundle_meta(c)[0]["timesteps"])
+    meta, _ = read_bundle_meta(source)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    shutil.copyfile(source, target)
+    info = {k: meta.get(k) for k in ("robot", "kind", "timesteps", "wall_time_s", "machine", "git_commit", "command")}
+    if not info["command"]:  # checkpoints do not record the command line; this reproduces the run
+        info["command"] = train_command(meta["config"], source.parent)
+    info["source"] = str(source)
+    info["curriculum"] = {"goal_size": meta["state"]["goal"]["size"], "obstacles": meta["state"]["obstacles"]["count"],
+                          "episodes": meta["state"]["episodes"]}
+    info["config"] = meta["config"]
+    # demonstrations cloned into the checkpoint (rayreach.learning.demonstrations) leave their reports beside it
+    info["demonstrations"] = [json.loads(r.read_text()) for r in sorted(source.parent.glob("clone-*.json"))]
+    json_path = target.with_suffix(".json")
+    json_path.write_text(json.dumps(info, indent=2, default=_json_default) + "\n")
+    return target, json_path

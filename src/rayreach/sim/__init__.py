@@ -1,0 +1,1 @@
+"""The simulated world: one PyBullet scene per client, the rays, the arm's kinematics, rendering."""
