@@ -1,4 +1,5 @@
-"""The detour a stalled policy is taken on: planned on the rays' hits alone (rayreach.acting.detour)."""
+"""The detour a stalled policy is taken on: planned on the rays' hits alone, read from the
+episode's ray memory (rayreach.acting.detour), then acting through ``ActingEnv``."""
 
 from __future__ import annotations
 
@@ -7,12 +8,15 @@ import dataclasses
 import numpy as np
 import pytest
 
-from exp1_scenes import exp1_around_the_tool
+from exp1_scenes import acting_around_the_tool, layers
+from rayreach.acting import ActingEnv
 from rayreach.acting.detour import Detour, DetourState
-from rayreach.env.reach import ReachEnv
 from rayreach.acting.final_approach import FinalApproach
-from rayreach.sim.geometry import distances_to_segment
+from rayreach.acting.layers import DetourStep
+from rayreach.acting.memory import RayMemory
 from rayreach.acting.shield import ACTING_SAFETY, SafetyLayer
+from rayreach.env.perception import Perception
+from rayreach.sim.geometry import distances_to_segment
 
 DOWN = np.array([0.0, 0.0, -1.0])
 LOW, HIGH = np.array([-0.4, -0.3, -0.2]), np.array([0.4, 0.3, 0.35])
@@ -20,7 +24,8 @@ TOOL_LENGTH, TOOL_RADIUS, ARRIVE, RANGE = 0.13, 0.02, 0.1, 0.4
 
 
 def _state(detour: Detour = Detour()) -> DetourState:
-    return DetourState(detour, TOOL_LENGTH, TOOL_RADIUS, ARRIVE, RANGE, LOW, HIGH)
+    """A detour over an empty ray memory (``_look_at`` adds scans to it)."""
+    return DetourState(detour, RayMemory(), TOOL_LENGTH, TOOL_RADIUS, ARRIVE, RANGE, LOW, HIGH)
 
 
 def _act(state: DetourState, ee, goal, distances) -> np.ndarray | None:
@@ -35,7 +40,12 @@ def _look_at(state: DetourState, origin, points, beyond: float = 0.0) -> None:
     offsets = points - np.asarray(origin, float)
     lengths = np.linalg.norm(offsets, axis=1)
     directions = offsets / lengths[:, None]
-    state.see(np.tile(origin, (len(points), 1)), directions, np.minimum(lengths + beyond, RANGE))
+    seen = np.minimum(lengths + beyond, RANGE)
+    scan = Perception(step=len(state.memory.scans), q=np.zeros(6), ee_position=np.asarray(origin, float),
+                      ee_rotation=np.eye(3), goal=np.zeros(3), origins=np.tile(origin, (len(points), 1)),
+                      directions=directions, lengths=seen, fractions=seen / RANGE, workspace_low=LOW,
+                      workspace_high=HIGH)
+    state.memory.add(scan, moved=True)
 
 
 def _wall(x: float = 0.0) -> np.ndarray:
@@ -102,6 +112,19 @@ def test_a_hit_is_remembered_once_per_voxel():
     assert len(state.seen()) == 2
 
 
+def test_the_memory_is_read_as_it_grows():
+    """The detour reads the episode's one ray memory: scans added after a look are taken in at
+    the next (a hit that a later ray passed through stays gone)."""
+    state = _state()
+    origin, point = np.zeros(3), np.array([0.2, 0.0, 0.0])
+    _look_at(state, origin, point)
+    np.testing.assert_allclose(state.seen(), [point])
+    _look_at(state, origin, point, beyond=1.0)  # passed through: forgotten
+    assert len(state.seen()) == 0
+    _look_at(state, origin, point + [0.0, 0.05, 0.0])
+    np.testing.assert_allclose(state.seen(), [point + [0.0, 0.05, 0.0]])
+
+
 def test_the_detour_starts_after_a_stall_steps_along_its_path_and_ends_near_the_goal():
     state = _state(Detour(stall_steps=3))
     ee, goal = np.array([0.15, 0.0, 0.0]), np.array([-0.15, 0.0, 0.0])
@@ -156,13 +179,16 @@ def test_on_the_detours_steps_the_shield_holds_off_only_what_is_nearer_than_the_
     assert detour.shield(SafetyLayer()) == SafetyLayer()  # off stays off
 
 
-def _idle(env: ReachEnv, steps: int = 1024) -> dict:
+def _idle(env: ActingEnv, steps: int = 1024) -> dict:
+    """Steps with a zero action; the last info, with every step's source under ``"sources"``."""
     env.reset(seed=0)
+    sources = []
     for _ in range(steps):
         _, _, terminated, truncated, info = env.step(np.zeros(6, np.float32))
+        sources.append(info["acting"]["source"])
         if terminated or truncated:
             break
-    return info
+    return {**info, "sources": sources}
 
 
 def _plate_between(ee):  # exp1's plate, between the tool and a goal 0.3 m beyond it
@@ -175,12 +201,19 @@ def test_env_takes_a_still_policy_round_a_plate_to_the_goal_without_contact():
     round what the rays see of the plate and the final approach finishes, with no contact
     PyBullet can find; without it the arm stands still to the end."""
     for detour, reached in ((None, False), (Detour(), True)):
-        env = exp1_around_the_tool([_plate_between], np.array([-0.3, 0.0, 0.0]), safety=ACTING_SAFETY,
-                                   final_approach=FinalApproach(), detour=detour)
+        config = layers(final_approach=FinalApproach(), safety=ACTING_SAFETY, detour=detour)
+        env = acting_around_the_tool([_plate_between], config, np.array([-0.3, 0.0, 0.0]))
         try:
             info = _idle(env)
             assert info["is_success"] == reached and not info["collision"]
+            sources = info["sources"]
+            assert ("detour" in sources) == reached
             if reached:
-                assert Detour.stall_steps < env.steps < 1024
+                steps = env.unwrapped.steps
+                assert Detour.stall_steps < steps < 1024
+                first = sources.index("detour")  # the policy's (still) steps until the stall
+                assert first >= Detour.stall_steps and set(sources[:first]) <= {"policy", "held"}
+                assert sources[-1] == "final_approach"  # which finishes
+                assert any(isinstance(c, DetourStep) for c in env.components)
         finally:
             env.close()

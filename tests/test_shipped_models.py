@@ -12,15 +12,19 @@ from statistics import NormalDist
 import numpy as np
 import pytest
 
+from rayreach.acting import ActingConfig, ActingEnv, ActingPolicy
+from rayreach.acting.config import ROBOT_RADII
 from rayreach.acting.detour import Detour
+from rayreach.acting.final_approach import FinalApproach
+from rayreach.env.episode import run_episode
 from rayreach.env.reach import ReachEnv
 from rayreach.evaluate.executor import Executor
+from rayreach.learning.policy import load_policy
 from rayreach.planners import make_planner
 from rayreach.planners.drl import MODELS_DIR
-from rayreach.acting.resample import ActingPolicy
-from rayreach.acting.final_approach import FinalApproach
-from rayreach.learning.policy import load_policy
 from rayreach.robots import get_robot
+from rayreach.scenarios import EXPERIMENTS
+from rayreach.scenarios.splits import get_split
 
 CASES = [("ur5", "exp1"), ("kr16", "exp4")]
 
@@ -41,16 +45,19 @@ def test_shipped_policy_loads_with_metadata_and_runs_an_episode(robot, scenario)
     assert meta["robot"] == robot and meta["timesteps"] > 0 and "rayreach train" in meta["command"]
     planner, record = _shipped_run(robot, scenario)
     assert planner.policy.normalization is not None  # training's statistics travel with the policy
-    assert record.outcome in {"success", "collision", "timeout", "out of bounds"}
-    assert 0 < record.steps <= 1024 and record.config["timesteps"] == meta["timesteps"]
+    assert record.outcome == "success" and not record.collision  # exp1 and exp4: 30 of 30 in the results
+    assert 0 < record.steps < 1024 and record.config["timesteps"] == meta["timesteps"]
+    share = record.acting_share  # every step counted once, the policy's among them
+    assert sum(share.values()) == pytest.approx(1.0) and share["policy"] > 0.5
+    assert share["policy"] * record.steps == pytest.approx(round(share["policy"] * record.steps))
     assert record.config["safety"] == {"workspace_guard": 0.01, "ray_shield": 0.05, "slide": 0.1, "memory_steps": 10,
                                        "arm_clearance": 0.01, "arm_memory_steps": 100,
                                        "guard_tool": True, "tool_clearance": 0.02}  # the executor's defaults
-    spec = get_robot(robot)  # the env fills in the robot's radius, step and tool
-    assert record.config["final_approach"] == {"radius": spec.final_approach_radius, "margin": FinalApproach.margin,
+    spec, radii = get_robot(robot), ROBOT_RADII[robot]  # the robot's step and tool, the acting radii
+    assert record.config["final_approach"] == {"radius": radii.radius, "margin": FinalApproach.margin,
                                                "ee_step": 0.005, "rot_step": spec.rot_step,
                                                "tool_length": spec.tool.length, "tool_radius": spec.tool.radius,
-                                               "axial_radius": spec.final_approach_axial_radius,
+                                               "axial_radius": radii.axial_radius,
                                                "axial_angle": FinalApproach.axial_angle,
                                                "stall_steps": 0, "stall_gain": 0.01, "turn": True}
     assert record.config["detour"] == dataclasses.asdict(Detour())
@@ -90,23 +97,22 @@ def test_a_drl_model_for_the_other_robot_is_refused():
         make_planner("drl", "kr16", model=MODELS_DIR / "ur5.zip")
 
 
-def test_drl_alone_runs_the_policy_without_the_acting_layers_and_restores_them():
-    """``drl-alone`` in the executor gives the episode of a bare env stepped by the same
-    policy, and the executor's next ``drl`` run has its layers back."""
+def test_drl_alone_runs_the_policy_without_the_acting_layers_and_the_stack_is_unchanged_after():
+    """``drl-alone`` in the executor gives the episode of the paper's env stepped by the same
+    policy, and the executor's next ``drl`` run is the stack's own."""
     alone = make_planner("drl-alone", "ur5")
     with Executor("exp1") as ex:
         record = ex.run(alone, seed=0)
         again = ex.run(make_planner("drl", "ur5"), seed=0)
     assert record.planner == "drl-alone" and record.config["final_approach"] is None and record.config["detour"] is None
-    assert record.config["safety"] == {"workspace_guard": 0.0, "ray_shield": 0.0, "slide": 0.0, "memory_steps": 0,
-                                       "arm_clearance": 0.0, "arm_memory_steps": 100, "guard_tool": False,
-                                       "tool_clearance": None}
-    env = ReachEnv(robot="ur5", scenario="exp1")  # no final approach, no safety layer
+    assert record.config["acting_layers"] == [] and record.acting_share == {"policy": 1.0}
+    assert record.config["safety"] == dataclasses.asdict(ActingConfig.off().safety)
+    env = ReachEnv(robot="ur5", scenario="exp1")  # the paper's env: nothing between action and arm
     try:
         obs, info = env.reset(seed=0)
         path, done = [info["ee_position"]], False
         while not done:
-            obs, _, terminated, truncated, info = env.step(alone.act(obs))
+            obs, _, terminated, truncated, info = env.step(alone.act(obs, info))
             path.append(info["ee_position"])
             done = terminated or truncated
     finally:
@@ -116,38 +122,50 @@ def test_drl_alone_runs_the_policy_without_the_acting_layers_and_restores_them()
     np.testing.assert_allclose(again.ee_path, _shipped_run("ur5", "exp1")[1].ee_path, atol=1e-9)
 
 
-def test_rollout_counts_outcomes_per_world_kind():
-    """``rollout`` on random worlds: the outcomes add up to the episodes, and each kind's
-    counts are those of the worlds that drew it (the same worlds, replayed one by one)."""
-    from rayreach.env.reach import episode_outcome
-    from rayreach.evaluate.rollout import EVAL_SEED_OFFSET, rollout
-    from rayreach.acting.shield import ACTING_SAFETY
+def test_rollout_counts_outcomes_and_sources_per_world_kind():
+    """``rollout`` on random worlds: the outcomes add up to the episodes, each kind's counts
+    are those of the worlds that drew it, and the share of steps by source is that of the
+    same worlds replayed one by one."""
+    from collections import Counter
+
+    from rayreach.env.episode import share
+    from rayreach.evaluate.rollout import rollout
     from rayreach.scenarios.random_world import world_kinds
 
     summary = rollout(MODELS_DIR / "kr16.zip", "random", episodes=4, progress=False)
     assert sum(summary.outcomes.values()) == 4 and summary.outcomes["success"] == summary.successes
+    assert summary.split == "validation" and summary.acting_layers == list(ActingConfig().layers)
     policy = load_policy(MODELS_DIR / "kr16.zip")
-    acting = ActingPolicy(policy)
-    env = ReachEnv(robot="kr16", scenario="random", goal_tolerance=0.01, safety=ACTING_SAFETY,
-                   final_approach=FinalApproach(), detour=Detour())
-    env.set_n_obstacles(policy.meta["state"]["obstacles"]["count"])
+    agent = ActingPolicy(policy)
+    base = ReachEnv(robot="kr16", scenario="random", goal_tolerance=0.01)
+    env = ActingEnv(base)
+    base.set_n_obstacles(policy.meta["state"]["obstacles"]["count"])
     expected: dict[str, dict[str, int]] = {}
+    sources: Counter = Counter()
+    first = get_split("validation").start
     try:
         for episode in range(4):
-            obs, _ = env.reset(seed=EVAL_SEED_OFFSET + episode)
-            acting.reset(EVAL_SEED_OFFSET + episode)
-            done = False
-            while not done:
-                obs, _, terminated, truncated, info = env.step(acting.act(obs))
-                done = terminated or truncated
-            for kind in world_kinds(env.scenario):
+            agent.reset(first + episode)
+            run = run_episode(env, agent.act, first + episode)
+            sources.update(run.sources)
+            for kind in world_kinds(base.scenario):
                 counts = expected.setdefault(kind, {"episodes": 0, "success": 0, "collision": 0,
                                                     "out_of_bounds": 0, "timeout": 0})
                 counts["episodes"] += 1
-                counts[episode_outcome(info)] += 1
+                counts[run.outcome] += 1
     finally:
         env.close()
     assert summary.by_kind == dict(sorted(expected.items()))
+    assert summary.acting_share == share(sources) and sum(summary.acting_share.values()) == pytest.approx(1.0)
+
+
+def test_rollout_refuses_seeds_outside_its_split():
+    from rayreach.evaluate.rollout import rollout
+
+    with pytest.raises(ValueError, match="leave the test split"):
+        rollout(MODELS_DIR / "ur5.zip", "random", episodes=2, seed=8_999_999, split="test", progress=False)
+    with pytest.raises(ValueError, match="unknown seed split 'train2'; valid: train, validation, test"):
+        rollout(MODELS_DIR / "ur5.zip", "random", episodes=1, split="train2", progress=False)
 
 
 def _exp1_start_observation() -> np.ndarray:
@@ -183,73 +201,35 @@ def test_a_drawn_action_follows_the_policys_gaussian_clipped_to_the_action_space
         assert abs(draws[:, k].mean() - expected) < 4 * std[k] / math.sqrt(len(draws))
 
 
-def test_the_acting_policy_draws_only_on_a_repeated_observation_and_repeats_with_its_seed():
+def test_the_acting_policy_draws_only_where_the_arm_was_held_and_repeats_with_its_seed():
     policy = load_policy(MODELS_DIR / "ur5.zip")
     obs = _exp1_start_observation()
-    other = obs.copy()
-    other[6] += 0.01  # the goal 1 cm further along x
+    moved, held = {"acting": {"source": "policy", "held": False}}, {"acting": {"source": "held", "held": True}}
     acting = ActingPolicy(policy)
 
     def run(seed: int) -> list[np.ndarray]:
         acting.reset(seed)
-        return [acting.act(o) for o in (obs, other, other, other, obs)]
+        return [acting.act(obs, info) for info in ({}, moved, held, held, moved)]
 
     actions = run(3)
-    for i, o in ((0, obs), (1, other), (4, obs)):  # a new observation: the mean
-        np.testing.assert_array_equal(actions[i], policy.act(o, deterministic=True))
+    for i in (0, 1, 4):  # the arm moved (or the episode starts): the mean
+        np.testing.assert_array_equal(actions[i], policy.act(obs, deterministic=True))
     assert not np.allclose(actions[2], actions[1]) and not np.allclose(actions[3], actions[2])  # drawn, and anew
     np.testing.assert_array_equal(np.array(run(3)), np.array(actions))
     assert not np.allclose(run(4)[2], actions[2])
     bare = ActingPolicy(policy, resample=False)
     bare.reset(3)
-    np.testing.assert_array_equal(bare.act(other), bare.act(other))
+    np.testing.assert_array_equal(bare.act(obs, held), policy.act(obs, deterministic=True))
 
 
-def test_the_kr16_turns_its_tool_to_reach_a_goal_beside_an_upright_plate():
-    """A random world (seed 1,000,035) with a plate 6 cm beside the goal: the tool, tilted
-    across the plate's edge, reaches the goal by turning towards its path; without the turn
-    the final approach is refused and the run times out."""
-    from rayreach.evaluate.rollout import rollout
-
-    world = dict(episodes=1, seed=1_000_035, progress=False)
-    assert rollout(MODELS_DIR / "kr16.zip", "random", **world).outcomes["success"] == 1
-    assert rollout(MODELS_DIR / "kr16.zip", "random", final_approach=FinalApproach(turn=False),
-                   **world).outcomes["timeout"] == 1
-
-
-def test_the_ur5s_tool_is_held_off_a_box_it_saw():
-    """A random world (seed 1,000,045) that starts with a box beside the tool: its rays see
-    the box, the step after sweeps the tool's blind side into it, unless the arm's rule
-    watches the tool too (``SafetyLayer.guard_tool``)."""
-    from rayreach.evaluate.rollout import rollout
-    from rayreach.acting.shield import ACTING_SAFETY
-
-    world = dict(episodes=1, seed=1_000_045, progress=False)
-    assert rollout(MODELS_DIR / "ur5.zip", "random", **world).outcomes["success"] == 1
-    unguarded = dataclasses.replace(ACTING_SAFETY, guard_tool=False)
-    assert rollout(MODELS_DIR / "ur5.zip", "random", safety=unguarded, **world).outcomes["collision"] == 1
-
-
-def test_the_ur5s_tool_keeps_its_own_clearance_from_a_moving_cover():
-    """A random world (seed 1,000,173) with a moving cover over the goal: held 1 cm off what
-    its rays saw, the tool strikes the cover on its way in; held 2 cm off
-    (``SafetyLayer.tool_clearance``, the acting default), it reaches the goal."""
-    from rayreach.evaluate.rollout import rollout
-    from rayreach.acting.shield import ACTING_SAFETY
-
-    world = dict(episodes=1, seed=1_000_173, progress=False)
-    assert ACTING_SAFETY.tool_clearance == 0.02
-    assert rollout(MODELS_DIR / "ur5.zip", "random", **world).outcomes["success"] == 1
-    near = dataclasses.replace(ACTING_SAFETY, tool_clearance=0.01)
-    assert rollout(MODELS_DIR / "ur5.zip", "random", safety=near, **world).outcomes["collision"] == 1
-
-
-def test_the_ur5_is_taken_round_a_goal_slot_it_hovers_above():
-    """A random world (seed 3,000,000): the goal between two plates, a box on the way. The
-    policy stalls short of them; the detour takes the tool round the slot's plates, into its
-    open end, where the final approach finishes. Without the detour the run times out."""
-    from rayreach.evaluate.rollout import rollout
-
-    world = dict(episodes=1, seed=3_000_000, progress=False)
-    assert rollout(MODELS_DIR / "ur5.zip", "random", **world).outcomes["success"] == 1
-    assert rollout(MODELS_DIR / "ur5.zip", "random", detour=None, **world).outcomes["timeout"] == 1
+@pytest.mark.expensive
+@pytest.mark.parametrize("scenario", EXPERIMENTS)
+def test_the_shipped_stack_solves_every_experiment_within_the_papers_path(scenario):
+    """Thirty runs of each experiment with every acting layer: all succeed, the mean path at
+    or below the paper's DRL path (``docs/results.md``; ``make test-all``)."""
+    paper = {"exp1": 0.45, "exp2": 0.85, "exp3": 1.18, "exp4": 0.91, "exp5": 0.93, "exp6": 0.95, "exp7": 0.98}
+    with Executor(scenario) as ex:
+        planner = make_planner("drl", ex.robot)
+        records = [ex.run(planner, seed) for seed in range(30)]
+    assert all(r.success for r in records)
+    assert np.mean([r.path_length for r in records]) <= paper[scenario]

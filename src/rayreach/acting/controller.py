@@ -3,7 +3,9 @@
 A Gymnasium wrapper, so that evaluation, training with the layers in the loop and a user's
 own loop all act the same way. Each step reports ``info["acting"]``: the ``source`` that
 chose the executed motion (``rayreach.acting.config.SOURCES``) and whether the arm was
-``held`` (its joints did not move).
+``held`` (its joints did not move: every try refused, or a step of nothing), and what
+``proposed`` the command before the shield reshaped it (``policy``, ``final_approach``,
+``detour`` or ``stall``).
 """
 
 from __future__ import annotations
@@ -97,6 +99,7 @@ class ActingEnv(gym.Wrapper):
                 command = proposed
                 break
         command.delta = np.clip(command.action, -1.0, 1.0) * episode.step_scale
+        proposed = command.source
         shaped = sum(component.reshape(command, now, episode) for component in self.components)
         ik, verdict = self._attempt(command, command.delta, now)
         for share in SHORTER if verdict is Verdict.SHORTER else ():
@@ -112,7 +115,7 @@ class ActingEnv(gym.Wrapper):
         episode.distances.append(info["distance"])
         info["reward_terms"]["shielded"] = shaped
         held = not taken or np.array_equal(q_before, reach.q)
-        info["acting"] = {"source": "held" if held else command.source, "proposed": command.source, "held": held}
+        info["acting"] = {"source": "held" if held else command.source, "proposed": proposed, "held": held}
         return obs, reward + shaped, terminated, truncated, info
 
     def _attempt(self, command: Command, delta: np.ndarray, now) -> tuple:

@@ -39,7 +39,7 @@ class Detour:
     """Least distance, m, between the tool's surface and any remembered hit on the path; on
     the detour's steps the safety layer's shield holds off only what is nearer than this
     (``shield``). A path between a goal slot's plates must fit (chosen from 3, 4 and 5 cm on
-    random worlds, docs/training.md, "Acting")."""
+    random worlds, docs/acting.md)."""
     replan_steps: int = 10
     """Steps between plans while a detour is followed (the rays see more as it goes)."""
     behind: float = 0.15

@@ -21,9 +21,9 @@ class FinalApproach:
     Not in the paper. The mean action of a PPO policy trained with an enlarged goal tends to
     settle a few centimetres from the goal (the sampling noise did the last centimetres in
     training), so a deterministic rollout times out beside a goal it has reached in all but
-    name (docs/training.md, "Acting"). The environment applies it
-    (``EnvConfig.final_approach``), where the rays' hit points are known, and sets the
-    robot's step and tool (and radii, unless given). The straight path is ``radius`` long at
+    name (docs/acting.md). ``rayreach.acting.ActingEnv`` applies it,
+    where the rays' hit points are known, and sets the robot's step and tool (and radii,
+    unless given). The straight path is ``radius`` long at
     most (``axial_radius`` along the tool's axis). Where only the tool's back blocks it, the
     tool first turns about its tip towards the path (``turn``). From farther away it can
     nudge a policy that has stalled towards the goal (``stall_steps``, off by default)."""
@@ -36,13 +36,13 @@ class FinalApproach:
     along it (``turn``)."""
 
     radius: float | None = None
-    """None: the robot's (``RobotSpec.final_approach_radius``), which the environment fills
+    """None: the robot's (``rayreach.acting.config.ROBOT_RADII``), which ``ActingEnv`` fills
     in. The UR5's is the enlarged goal the curriculum trains at (0.1 m), which the policy
     reliably comes this close to; from 0.13 m on, its straight paths ran under moving goal
     covers whose thin edges no ray saw, and the tool met them. The KR16's is 0.2 m, where it
     met nothing more."""
     axial_radius: float | None = None
-    """None: the robot's (``RobotSpec.final_approach_axial_radius``). From within this
+    """None: the robot's (``rayreach.acting.config.ROBOT_RADII``). From within this
     distance too, m, but only where the path lies within ``axial_angle`` of the tool's axis:
     a tool moving along its own axis sweeps little more than the cone its tip rays look
     into. The UR5's policy descends onto a goal below it, as in exp1, from 0.12 m; a radius
@@ -69,7 +69,7 @@ class FinalApproach:
     acts again from a new state. The mean action of a policy that hovers or presses against
     what it sees repeats itself until the step budget runs out. 0 (the default): off. At 100
     the shipped policies succeed more often and collide more often too, since the nudges go
-    where no ray looks (docs/training.md, "Acting"), so it is the user's choice."""
+    where no ray looks (docs/acting.md), so it is the user's choice."""
     stall_gain: float = 0.01
     """Least progress towards the goal, m, over ``stall_steps`` steps."""
     turn: bool = True
@@ -78,7 +78,7 @@ class FinalApproach:
     towards the path, while the turned tool keeps the margin or comes no nearer to anything
     seen. A tool pointing along its path sweeps only the path. A KR16 tool tilted across an
     upright plate beside the goal swept its back over the plate's edge, so the path was
-    refused again and again and the run timed out (docs/training.md, "Acting")."""
+    refused again and again and the run timed out (docs/acting.md)."""
 
     def __post_init__(self) -> None:
         for name in ("radius", "axial_radius", "axial_angle", "ee_step", "rot_step", "stall_gain"):
@@ -99,7 +99,7 @@ class FinalApproach:
     @staticmethod
     def towards(goal_offset: np.ndarray) -> np.ndarray:
         """A full step along ``goal_offset`` (goal minus end effector, m), as an action (also the
-        safety layer's slide, ``ReachEnv.step``)."""
+        safety layer's slide, ``rayreach.acting.layers``)."""
         action = np.zeros(6, dtype=np.float32)
         action[:3] = np.asarray(goal_offset, dtype=float) / max(float(np.linalg.norm(goal_offset)), 1e-9)
         return action
@@ -117,7 +117,7 @@ class FinalApproach:
         the safety layer's ray shield still does. Where the path is refused, the step may be
         a turn of the tool instead (``turn``): a rotation and no translation."""
         if self.radius is None:
-            raise ValueError("FinalApproach.radius is None: give one, or let ReachEnv fill in the robot's")
+            raise ValueError("FinalApproach.radius is None: give one, or let ActingEnv fill in the robot's")
         goal_offset = np.asarray(goal_offset, dtype=float)
         if not self.within_reach(goal_offset, tool_direction):
             return None

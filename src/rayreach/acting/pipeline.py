@@ -29,7 +29,7 @@ class Verdict(Enum):
     REFUSE = "refuse"
     """The arm holds still this step."""
     SHORTER = "shorter"
-    """Refused, but a shorter step (``Pipeline.SHORTER``) may pass."""
+    """Refused, but a shorter step (``rayreach.acting.controller.SHORTER``) may pass."""
 
 
 @dataclass

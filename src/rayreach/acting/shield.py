@@ -2,7 +2,7 @@
 (unless ``rayreach train --acting-layers``).
 
 A trained policy still drives into what its rays see and out of the workspace now and then
-(docs/training.md, "Acting"). A cell's controller would not let it: a safety zone holds the
+(docs/acting.md). A cell's controller would not let it: a safety zone holds the
 tool inside the workspace, and speed and separation monitoring stops motion towards a
 nearby obstacle. ``SafetyLayer`` does both with what the agent itself observes (its rays,
 its end-effector position) plus the workspace bounds; it never looks at the obstacles.
@@ -58,7 +58,7 @@ class SafetyLayer:
     (``rayreach.acting.final_approach.FinalApproach``), whose straight path is tested against every hit
     with the tool's shape already and may pass a wall nearer than ``arm_clearance``. A thin
     plate seen edge-on slips between the rays; a tool that saw it a few steps earlier swept
-    its side into it (docs/training.md, "Acting")."""
+    its side into it (docs/acting.md)."""
     tool_clearance: float | None = None
     """The clearance, m, the arm's rule keeps the tool at when ``guard_tool`` is set; None:
     ``arm_clearance``. The tool and the arm links are each held to their own: a plate's
@@ -80,7 +80,7 @@ class SafetyLayer:
 
     @property
     def active(self) -> bool:
-        """Whether ``filter`` changes anything (the arm's rule is the environment's)."""
+        """Whether ``filter`` changes anything (the arm's rule is a component of its own, ``rayreach.acting.layers.ArmRule``)."""
         return self.workspace_guard > 0 or self.ray_shield > 0
 
     def filter(self, delta: np.ndarray, ee_pos: np.ndarray, low: np.ndarray, high: np.ndarray,
@@ -266,4 +266,4 @@ shield (chosen from 3, 5 and 8 cm on random worlds) that remembers the last 10 s
 hits (10, 20 and 40 measured alike), a slide once less than a tenth of a step is left, and
 the arm held 1 cm and the tool 2 cm off what the rays saw in the last 100 moving steps (1
 and 2 cm, 100 to 1024 steps measured for the arm; 1, 1.5 and 2 cm for the tool on its own;
-docs/training.md, "Acting")."""
+docs/acting.md)."""

@@ -1,0 +1,62 @@
+"""The paper's environment stands alone; every acting layer has one switch, by name."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import pytest
+
+from rayreach.acting import LAYERS, ActingConfig
+from rayreach.cli import acting_from_args, build_parser
+from rayreach.planners import DRL_PLANNERS, drl_acting
+
+
+def test_the_papers_environment_imports_no_acting_module():
+    """Made and stepped through Gymnasium, in a fresh interpreter (this one has imported the
+    acting layers already)."""
+    code = """
+import sys, gymnasium as gym, rayreach
+for robot in ("UR5", "KR16"):
+    env = gym.make(f"rayreach/Reach-{robot}-v0"); env.reset(seed=0)
+    for _ in range(20):
+        _, _, terminated, truncated, _ = env.step(env.action_space.sample())
+        if terminated or truncated:
+            env.reset()
+    env.close()
+print(sorted(m for m in sys.modules if m.startswith("rayreach.acting")))
+"""
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert done.stdout.strip().splitlines()[-1] == "[]"
+
+
+def test_each_layer_switches_off_by_name_and_only_that_layer():
+    stack = ActingConfig()
+    assert stack.layers == LAYERS  # the shipped stack has every layer on
+    for layer in LAYERS:
+        assert ActingConfig().without(layer).layers == tuple(name for name in LAYERS if name != layer)
+    assert ActingConfig.off().layers == ()
+    assert ActingConfig.training().layers == ("ray_shield", "workspace_guard", "arm_guard")
+    with pytest.raises(ValueError, match=r"unknown acting layer\(s\) \['shield'\]; known: final_approach, ray_shield"):
+        ActingConfig().without("shield")
+
+
+def test_the_rollout_command_has_one_switch_per_layer():
+    parser = build_parser()
+    base = ["rollout", "--model", "m.zip", "exp1"]
+    assert acting_from_args(parser.parse_args(base)).layers == LAYERS
+    for layer in LAYERS:
+        flag = f"--no-{layer.replace('_', '-')}"
+        assert acting_from_args(parser.parse_args([*base, flag])) == ActingConfig().without(layer)
+    assert acting_from_args(parser.parse_args([*base, "--policy-alone"])) == ActingConfig.off()
+    tuned = acting_from_args(parser.parse_args([*base, "--ray-shield", "0.08", "--no-slide"]))
+    assert tuned.safety.ray_shield == 0.08 and "slide" not in tuned.layers
+
+
+def test_drl_planner_names_are_the_stack_the_policy_alone_and_the_stack_minus_one_layer():
+    assert drl_acting("drl") == ActingConfig() and drl_acting("drl-alone") == ActingConfig.off()
+    for layer in LAYERS:
+        assert f"drl-no-{layer}" in DRL_PLANNERS and drl_acting(f"drl-no-{layer}") == ActingConfig().without(layer)
+    with pytest.raises(ValueError, match="unknown DRL planner 'drl-no-wings'; valid: drl, drl-alone"):
+        drl_acting("drl-no-wings")
