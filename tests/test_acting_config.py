@@ -60,3 +60,13 @@ def test_drl_planner_names_are_the_stack_the_policy_alone_and_the_stack_minus_on
         assert f"drl-no-{layer}" in DRL_PLANNERS and drl_acting(f"drl-no-{layer}") == ActingConfig().without(layer)
     with pytest.raises(ValueError, match="unknown DRL planner 'drl-no-wings'; valid: drl, drl-alone"):
         drl_acting("drl-no-wings")
+
+
+def test_bench_acting_times_every_variant_on_the_same_worlds(monkeypatch):
+    from rayreach.evaluate import bench_acting as bench
+    from rayreach.planners.drl import MODELS_DIR
+
+    monkeypatch.setattr(bench, "VARIANTS", {"drl": ActingConfig(), "drl-alone": ActingConfig.off()})
+    record = bench.bench_acting(MODELS_DIR / "ur5.zip", episodes=1, progress=False)
+    assert set(record) == {"drl", "drl-alone"} and record["drl"]["ratio"] == 1.0
+    assert all(r["steps"] > 0 and r["us_per_step"] > 0 for r in record.values())

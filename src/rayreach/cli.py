@@ -59,6 +59,13 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument("--json", action="store_true", help="print one JSON line")
     bench.add_argument("--breakdown", action="store_true", help="also time each part of a step (us per call)")
 
+    bact = sub.add_parser("bench-acting", help="microseconds per step of the acting stack, minus each layer, and alone")
+    bact.add_argument("--model", required=True, help="a model or checkpoint .zip")
+    bact.add_argument("--episodes", type=int, default=10, help="random worlds, each run by every variant in turn")
+    bact.add_argument("--obstacles", type=int, default=None, help="obstacles per world (default: training's)")
+    bact.add_argument("--split", choices=EVALUATION_SPLITS, default="validation")
+    bact.add_argument("--json", action="store_true", help="print one JSON line")
+
     bplan = sub.add_parser("bench-planners", help="planning time, path length and collision checks/s of the planners")
     bplan.add_argument("--scenario", default="exp1", help="exp1..exp7 or a scene file")
     bplan.add_argument("--runs", type=int, default=10)
@@ -208,6 +215,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _evaluate(args)
         if args.command == "bench-planners":
             return _bench_planners(args)
+        if args.command == "bench-acting":
+            return _bench_acting(args)
         if args.command == "demo":
             return _demo(args)
         if args.command == "train":
@@ -340,6 +349,19 @@ def _evaluate(args: argparse.Namespace) -> int:
         print(written["table"].read_text())
     for kind, path in written.items():
         print(f"{kind}: {path}")
+    return 0
+
+
+def _bench_acting(args: argparse.Namespace) -> int:
+    from rayreach.evaluate.bench_acting import bench_acting
+
+    record = bench_acting(args.model, args.episodes, args.obstacles, args.split, progress=not args.json)
+    if args.json:
+        print(json.dumps(record))
+        return 0
+    print(f"{'variant':>24} {'us/step':>9} {'ratio':>7} {'steps':>7}")
+    for name, r in record.items():
+        print(f"{name:>24} {r['us_per_step']:9.1f} {r['ratio']:7.3f} {r['steps']:7d}")
     return 0
 
 
