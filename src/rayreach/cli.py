@@ -121,7 +121,8 @@ def build_parser() -> argparse.ArgumentParser:
     train.add_argument("--obstacles", type=int, default=None,
                        help="fix the obstacle count (no obstacle curriculum; also holds a resumed run's count)")
     train.add_argument("--acting-layers", action="store_true",
-                       help="train with the final approach and safety layer the planner acts with (kept on --resume)")
+                       help="train through the acting layers that reshape or refuse the policy's step: shield, "
+                            "workspace guard, arm's rule (ActingConfig.training; kept on --resume)")
     train.add_argument("--critic-warmup", type=int, default=0,
                        help="steps at the start of this part in which only the critic learns (after clone)")
     train.add_argument("--learning-rate", type=float, default=None,

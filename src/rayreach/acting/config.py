@@ -26,7 +26,8 @@ class FinalApproachRadii:
 
 
 ROBOT_RADII = {
-    "ur5": FinalApproachRadii(0.1, 0.13),  # the enlarged goal the curriculum trains at; 0.13 and 0.15 m alike along the axis, 0.2 m worse
+    # the enlarged goal the curriculum trains at; along the axis 0.13 and 0.15 m alike, 0.2 m worse
+    "ur5": FinalApproachRadii(0.1, 0.13),
     "kr16": FinalApproachRadii(0.2, None),  # chosen from 0.1..0.3 m
 }
 """The final approach's radii per robot (``FinalApproach.radius``, ``axial_radius``);

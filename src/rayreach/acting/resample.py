@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from rayreach.learning.policy import Policy
+if TYPE_CHECKING:  # acting reads a loaded policy; it does not load one
+    from rayreach.learning.policy import Policy
 
 
 class ActingPolicy:

@@ -80,7 +80,8 @@ class SafetyLayer:
 
     @property
     def active(self) -> bool:
-        """Whether ``filter`` changes anything (the arm's rule is a component of its own, ``rayreach.acting.layers.ArmRule``)."""
+        """Whether ``filter`` changes anything (the arm's rule is a component of its own,
+        ``rayreach.acting.layers.ArmRule``)."""
         return self.workspace_guard > 0 or self.ray_shield > 0
 
     def filter(self, delta: np.ndarray, ee_pos: np.ndarray, low: np.ndarray, high: np.ndarray,
@@ -93,8 +94,8 @@ class SafetyLayer:
     def shape(self, delta: np.ndarray, ee_pos: np.ndarray, low: np.ndarray, high: np.ndarray,
               ray_distances: np.ndarray, ray_directions: np.ndarray, travel: float | None = None,
               towards_goal: np.ndarray | None = None, keep_rotation: bool = False) -> tuple[np.ndarray, bool]:
-        """(step, slid): ``delta`` (dx, dy, dz, rotation vector) as the arm may execute it. ``ray_distances``
-        (m) and unit ``ray_directions`` are those of the current observation. ``travel``: how
+        """(step, slid): ``delta`` (dx, dy, dz, rotation vector) as the arm may execute it.
+        ``ray_distances`` (m) and unit ``ray_directions`` are those of the current observation. ``travel``: how
         far, m, the motion goes in all when that is known (a straight path to the goal); if
         every ray sees farther than that, nothing seen can be reached and the shield lets
         the motion through. Without it, a goal a few centimetres from a wall could not be

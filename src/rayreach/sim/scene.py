@@ -11,7 +11,7 @@ pass through the robot, and obstacles are never tested against each other.
 from __future__ import annotations
 
 from contextlib import contextmanager
-from typing import Iterator, Sequence
+from typing import TYPE_CHECKING, Iterator, Sequence
 
 import numpy as np
 import pybullet as p
@@ -19,9 +19,11 @@ import pybullet as p
 from rayreach.sim.quiet import c_stdout_suppressed
 from rayreach.robots.spec import RobotSpec
 from rayreach.robots.urdf import TCP_LINK, resolved_urdf
-from rayreach.scenarios.schema import ObstacleSpec
 from rayreach.sim.sensors import BulletCaster, NumpyCaster, PrimitiveSet, RayCaster
 from rayreach.sim.transforms import rpy_to_matrix
+
+if TYPE_CHECKING:  # the scene builds what a scenario describes; it reads the fields, imports no loader
+    from rayreach.scenarios.schema import ObstacleSpec
 
 ROBOT_GROUP = 2
 OBSTACLE_GROUP = 1
