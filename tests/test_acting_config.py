@@ -70,3 +70,23 @@ def test_bench_acting_times_every_variant_on_the_same_worlds(monkeypatch):
     record = bench.bench_acting(MODELS_DIR / "ur5.zip", episodes=1, progress=False)
     assert set(record) == {"drl", "drl-alone"} and record["drl"]["ratio"] == 1.0
     assert all(r["steps"] > 0 and r["us_per_step"] > 0 for r in record.values())
+
+
+def test_an_acting_env_refuses_wrappers_it_would_step_past_and_a_reset_it_did_not_make():
+    import gymnasium as gym
+    import numpy as np
+    from gymnasium.wrappers import RecordEpisodeStatistics
+
+    from rayreach.acting import ActingEnv
+
+    with pytest.raises(TypeError, match="would pass RecordEpisodeStatistics by; wrap the ActingEnv in it instead"):
+        ActingEnv(RecordEpisodeStatistics(gym.make("rayreach/Reach-UR5-v0", scenario="exp1")))
+    first = ActingEnv(gym.make("rayreach/Reach-UR5-v0", scenario="exp1"))  # the checkers gym.make adds may stay
+    try:
+        first.reset(seed=0)
+        first.step(np.zeros(6))
+        ActingEnv(first.env, ActingConfig.off()).reset(seed=0)
+        with pytest.raises(RuntimeError, match="another wrapper has reset the environment since this one did"):
+            first.step(np.zeros(6))
+    finally:
+        first.close()

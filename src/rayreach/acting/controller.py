@@ -14,6 +14,7 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
+from gymnasium.wrappers import OrderEnforcing, PassiveEnvChecker
 
 from rayreach.acting.arm_guard import ArmCapsules
 from rayreach.acting.config import ROBOT_RADII, ActingConfig, FinalApproachRadii
@@ -30,6 +31,10 @@ would repeat the refused step, held, until its step budget ran out: a KR16 tool 
 0.5 mm short of the goal's tolerance)."""
 
 
+PASSED_WRAPPERS = (OrderEnforcing, PassiveEnvChecker)
+"""Wrappers ``gym.make`` adds that only check calls: an ``ActingEnv`` may sit outside them."""
+
+
 class ActingEnv(gym.Wrapper):
     """``env`` (a ``ReachEnv``) acting through the layers of ``config``."""
 
@@ -38,6 +43,13 @@ class ActingEnv(gym.Wrapper):
         reach: ReachEnv = env.unwrapped  # type: ignore[assignment]
         if not isinstance(reach, ReachEnv):
             raise TypeError(f"ActingEnv wraps a rayreach ReachEnv, got {type(reach).__name__}")
+        inner = env
+        while isinstance(inner, gym.Wrapper):  # steps go to the ReachEnv itself, past these
+            if not isinstance(inner, PASSED_WRAPPERS):
+                raise TypeError(f"ActingEnv steps the ReachEnv itself and would pass {type(inner).__name__} by; "
+                                f"wrap the ActingEnv in it instead (allowed inside: "
+                                f"{', '.join(w.__name__ for w in PASSED_WRAPPERS)})")
+            inner = inner.env
         self.reach = reach
         self.config = config
         spec = reach.spec_robot
@@ -81,6 +93,7 @@ class ActingEnv(gym.Wrapper):
         memory = RayMemory()
         memory.add(self.reach.perceive(), moved=True)
         self._episode = Episode(memory, [info["distance"]], self.reach.step_scale)
+        self._env_episode = self.reach.episodes
         self._goal_index = 0
         for component in self.components:
             component.reset(self._episode)
@@ -89,8 +102,9 @@ class ActingEnv(gym.Wrapper):
     def step(self, action: np.ndarray):
         reach, episode = self.reach, self._episode
         a = reach.check_action(action)
-        if episode is None:
-            raise RuntimeError("call reset() before step()")
+        if episode is None or self._env_episode != reach.episodes:
+            raise RuntimeError("call reset() before step()" + ("" if episode is None else
+                               ": another wrapper has reset the environment since this one did"))
         now = episode.memory.now
         command = Command(a, "policy")
         for component in self.components:

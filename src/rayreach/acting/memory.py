@@ -56,12 +56,14 @@ class RayMemory:
 
     def before(self, steps: int) -> list[Scan]:
         """The last ``steps`` scans before the current one, oldest first (the ray shield's view)."""
+        steps = int(steps)
         return self.scans[max(0, len(self.scans) - 1 - steps):-1] if steps > 0 else []
 
     def seen_points(self, steps: int) -> np.ndarray:
         """The world points the rays hit in the last ``steps`` scans taken after the arm moved,
         the current one included when it did, oldest first, (n, 3) (the arm's rule's view:
         a held arm sees what it saw, and the memory ages only as the arm moves)."""
+        steps = int(steps)
         if steps <= 0:
             return np.zeros((0, 3))
         key = (len(self.scans), steps)

@@ -186,6 +186,8 @@ class ReachEnv(gym.Env):
             self._load_fixed(fixed)
         self._shake = R.ShakeCounter()
         self._ready = False
+        self.episodes = 0
+        """Resets so far (a wrapper acting on the env tells its own episode from another's)."""
 
     # ------------------------------------------------------------------ setup
     def _load_fixed(self, scenario: Scenario) -> None:
@@ -237,8 +239,9 @@ class ReachEnv(gym.Env):
         self._ready = True
         distance = float(np.linalg.norm(self.goals[0] - self.ee_pos))
         self._previous_distance = distance
+        self.episodes += 1
         info = {"distance": distance, "ee_position": self.ee_pos.copy(), "goal": self.goals[0].copy(),
-                "goal_index": 0, "is_success": False}
+                "goal_index": 0, "is_success": False, "collision": False, "out_of_bounds": False}
         return self._observation(distance, self._cast_rays()), info
 
     def step(self, action: np.ndarray):
