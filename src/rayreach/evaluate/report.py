@@ -353,7 +353,7 @@ def trajectory_figure(store: ResultsStore, experiments: list[str], planners: lis
     fig = plt.figure(figsize=(width, 3.6 * sum(heights) + title_height + 0.3 * len(VIEWS) + legend_height))
     height = fig.get_figheight()
     grid = fig.add_gridspec(len(VIEWS), cols, height_ratios=heights, left=0.02, right=0.96, wspace=0.15,
-                            hspace=0.1, bottom=legend_height / height, top=1 - title_height / height)
+                            hspace=0.25, bottom=legend_height / height, top=1 - title_height / height)
     for k, (experiment, (scenario, runs)) in enumerate(zip(experiments, scenes)):
         for row, view in enumerate(VIEWS):
             ax = fig.add_subplot(grid[row, k], projection="3d", computed_zorder=False)
