@@ -53,10 +53,11 @@ class ActingEnv(gym.Wrapper):
         self.reach = reach
         self.config = config
         spec = reach.spec_robot
-        radii = ROBOT_RADII.get(spec.name, FinalApproachRadii())
+        self.radii = ROBOT_RADII.get(spec.name, FinalApproachRadii())
+        """The robot's final-approach radii (``ROBOT_RADII``)."""
         self.final_approach = None if config.final_approach is None else applied_final_approach(
             config.final_approach, spec.ee_step, spec.rot_step, spec.tool.length, spec.tool.radius,
-            radii.radius, radii.axial_radius)
+            self.radii.radius, self.radii.axial_radius)
         """The final approach as applied: the robot's step, tool and radii filled in."""
         self.components = self._components(config)
         self._episode: Episode | None = None
@@ -69,7 +70,7 @@ class ActingEnv(gym.Wrapper):
         if approach is not None:
             components.append(FinalApproachStep(approach))
         if config.detour is not None:
-            arrive = ROBOT_RADII.get(spec.name, FinalApproachRadii()).radius if approach is None else approach.radius
+            arrive = self.radii.radius if approach is None else approach.radius
             guard = safety.workspace_guard + spec.ee_step  # the grid keeps a step inside the guard
             components.append(DetourStep(config.detour, safety, spec.tool.length, spec.tool.radius, arrive,
                                          reach.config.ray_range, guard))

@@ -7,15 +7,15 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from rayreach.acting import LAYERS, ActingConfig, ActingEnv, ActingPolicy
+from rayreach.acting import ActingEnv, ActingPolicy
 from rayreach.env.episode import run_episode
 from rayreach.env.reach import ReachEnv
 from rayreach.learning.policy import load_policy
+from rayreach.planners import DRL_PLANNERS, drl_acting
 from rayreach.scenarios.splits import get_split
 
-VARIANTS = {"drl": ActingConfig(), **{f"drl-no-{layer}": ActingConfig().without(layer) for layer in LAYERS},
-            "drl-alone": ActingConfig.off()}
-"""The evaluation's DRL planners (``rayreach.planners.DRL_PLANNERS``) and their layers."""
+VARIANTS = {name: drl_acting(name) for name in DRL_PLANNERS}
+"""The evaluation's DRL planners and their layers."""
 
 
 def bench_acting(model: str | Path, episodes: int = 10, n_obstacles: int | None = None, split: str = "validation",

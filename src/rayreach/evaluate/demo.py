@@ -43,9 +43,9 @@ def scripted_episode(scenario: str, out_dir: str | Path, clearance_z: float = 0.
     """Run the scripted episode on a built-in scenario and draw its trajectory."""
     env = ReachEnv(scenario=scenario)
     try:
-        env.reset(seed=0)
+        start = env.reset(seed=0)
         actions = iter(scripted_actions(env, clearance_z))
-        episode = run_episode(env, lambda obs, info: next(actions, None), seed=0)
+        episode = run_episode(env, lambda obs, info: next(actions, None), start=start)
         path, info, total = episode.ee_path, episode.info, episode.total_reward
         picture = draw_scene(env, Path(out_dir) / f"{scenario}-scripted.png", trajectory=path,
                              title=f"{scenario}: scripted episode, {len(path) - 1} steps")

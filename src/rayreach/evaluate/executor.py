@@ -176,9 +176,9 @@ class Executor:
     # ------------------------------------------------------------------ runs
     def run(self, planner: GlobalPlanner | ReactivePlanner, seed: int) -> RunRecord:
         """One run of ``planner`` with world, goal IK and planner randomness from ``seed``."""
-        self.reset(seed)
         if isinstance(planner, ReactivePlanner):
-            return self._run_reactive(planner, seed)
+            return self._run_reactive(planner, seed)  # its episode resets the world
+        self.reset(seed)
         return self._run_global(planner, seed)
 
     @staticmethod
