@@ -6,6 +6,9 @@ Importing the package registers the Gymnasium environments listed in ``ENV_IDS``
     import rayreach
 
     env = gym.make("rayreach/Reach-UR5-v0", scenario="exp1")
+    envs = gym.make_vec("rayreach/Reach-UR5-v0", num_envs=256, vectorization_mode="vector_entry_point")
+
+``make_vec`` with ``vector_entry_point`` steps all worlds as one batch (``rayreach.env.vector``).
 """
 
 from __future__ import annotations
@@ -19,7 +22,8 @@ for _robot in ("UR5", "KR16"):
     _id = f"rayreach/Reach-{_robot}-v0"
     if _id not in registry:
         # no max_episode_steps: the env truncates itself at its step budget, with the paper's -5
-        register(id=_id, entry_point="rayreach.env.reach:ReachEnv", kwargs={"robot": _robot.lower()})
+        register(id=_id, entry_point="rayreach.env.reach:ReachEnv",
+                 vector_entry_point="rayreach.env.vector:ReachVectorEnv", kwargs={"robot": _robot.lower()})
     ENV_IDS.append(_id)
 
 __all__ = ["ENV_IDS", "__version__"]

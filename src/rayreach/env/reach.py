@@ -32,7 +32,8 @@ earlier goals of a sequence switch to the next one), collision -10 (ends), dista
 shaking -0.005 n_s; plus optional progress and proximity terms for training (weight 0 by
 default, as in the paper).
 ``info`` carries every term (``reward_terms``), ``distance``,
-``is_success``, ``collision``, ``out_of_bounds``, ``ee_position`` and ``goal``.
+``is_success``, ``collision``, ``out_of_bounds``, ``ee_position`` and ``goal``; an episode's
+last ``info`` also sums each term over the episode (``episode_reward_terms``).
 
 ## Acting from outside
 
@@ -70,6 +71,9 @@ from rayreach.sim.transforms import matrix_to_rpy, rotvec_to_matrix
 
 N_ROBOT_OBS = 13
 OBS_SIZE = N_ROBOT_OBS + N_RAYS
+REWARD_TERM_NAMES = ("success", "collision", "distance", "shaking", "out_of_bounds", "exhausted", "progress",
+                     "proximity")
+"""The reward terms of a step, in the order they are summed (``info["reward_terms"]``)."""
 
 
 @dataclass(frozen=True)
@@ -139,6 +143,20 @@ def make_config(config: EnvConfig | None, overrides: dict[str, Any]) -> EnvConfi
     return replace(base, **overrides)
 
 
+def resolve_task(robot: str | RobotSpec | None, scenario: str | Path | Scenario) -> tuple[RobotSpec, Scenario | None]:
+    """The robot and the fixed scenario (None for random worlds) an environment is made for;
+    the robot may be left out where the scenario names it."""
+    fixed = None if isinstance(scenario, str) and scenario == RANDOM else get_scenario(scenario)
+    if robot is None:
+        if fixed is None:
+            raise ValueError("a random-world environment needs a robot (ur5 or kr16)")
+        robot = fixed.robot
+    spec = get_robot(robot)
+    if fixed is not None and fixed.robot != spec.name:
+        raise ScenarioError(f"scenario '{fixed.name}' is for robot '{fixed.robot}', not '{spec.name}'")
+    return spec, fixed
+
+
 class ReachEnv(gym.Env):
     """Reach one goal (or a sequence) with a UR5 or KR16; see the module docstring."""
 
@@ -156,15 +174,8 @@ class ReachEnv(gym.Env):
             raise ValueError(f"unknown render_mode '{render_mode}'; valid: {self.metadata['render_modes']}")
         self.config = make_config(config, overrides)
         self.render_mode = render_mode
-        self.random = isinstance(scenario, str) and scenario == RANDOM
-        fixed = None if self.random else get_scenario(scenario)
-        if robot is None:
-            if fixed is None:
-                raise ValueError("a random-world environment needs a robot (ur5 or kr16)")
-            robot = fixed.robot
-        self.spec_robot = get_robot(robot)
-        if fixed is not None and fixed.robot != self.spec_robot.name:
-            raise ScenarioError(f"scenario '{fixed.name}' is for robot '{fixed.robot}', not '{self.spec_robot.name}'")
+        self.spec_robot, fixed = resolve_task(robot, scenario)
+        self.random = fixed is None
         base_pos = fixed.base_position if fixed else None
         base_rpy = fixed.base_rpy if fixed else None
         self.kin = Kinematics(self.spec_robot, base_pos, base_rpy)
@@ -236,6 +247,7 @@ class ReachEnv(gym.Env):
         self.steps = 0
         self.time = 0.0
         self._shake.reset()
+        self._episode_terms = dict.fromkeys(REWARD_TERM_NAMES, 0.0)
         self._ready = True
         distance = float(np.linalg.norm(self.goals[0] - self.ee_pos))
         self._previous_distance = distance
@@ -318,8 +330,8 @@ class ReachEnv(gym.Env):
             self._shake.reset()
             distance = float(np.linalg.norm(self.goals[self.goal_index] - self.ee_pos))
         self._previous_distance = distance
-        if terminated or truncated:
-            self._ready = False
+        for key, value in terms.items():
+            self._episode_terms[key] += value
         info = {
             "reward_terms": terms,
             "distance": distance,
@@ -336,6 +348,9 @@ class ReachEnv(gym.Env):
             "n_shakes": n_shakes,
             "time": self.time,
         }
+        if terminated or truncated:
+            self._ready = False
+            info["episode_reward_terms"] = dict(self._episode_terms)
         return self._observation(distance, rays), float(sum(terms.values())), terminated, truncated, info
 
     def _cast_rays(self) -> np.ndarray:

@@ -1,4 +1,5 @@
-"""Benchmarks: environment throughput for both ray backends side by side, and the planners."""
+"""Benchmarks: environment throughput (both ray backends side by side, or the single env
+against the batched one), and the planners."""
 
 from __future__ import annotations
 
@@ -55,6 +56,49 @@ def bench_env(robot: str, scenario: str, steps: int = 3000, rounds: int = 3, see
             env.close()
     total = block * rounds
     return BenchResult({b: total / elapsed[b] for b in backends}, total, rounds)
+
+
+def bench_batched(robot: str, scenario: str, n_worlds: int = 256, steps: int = 20000, rounds: int = 3,
+                  seed: int = 0) -> dict:
+    """World steps per second of one ``ReachEnv`` and of a ``BatchedReachEnv`` of ``n_worlds``
+    worlds, each taking ``steps`` world steps (the batched env ``steps / n_worlds`` calls) of
+    uniformly random actions, in ``rounds`` interleaved blocks; episodes reset as they end,
+    resets included. Building the envs and their first reset (numba's compiled code is
+    loaded then) are not timed. Also: the batched step's seconds per stage, per world step."""
+    from rayreach.env.batched import BatchedReachEnv
+
+    single = ReachEnv(robot=robot, scenario=scenario)
+    batched = BatchedReachEnv(robot, n_worlds, scenario, seed=seed)
+    rng = np.random.default_rng(seed)
+    calls = max(1, steps // (n_worlds * rounds))
+    block = calls * n_worlds
+    elapsed = {"single": 0.0, "batched": 0.0}
+    try:
+        single.reset(seed=seed)
+        batched.reset()
+        batched.step(rng.uniform(-1, 1, (n_worlds, 6)).astype(np.float32))  # warm-up: first call of each kernel
+        batched.stage_seconds = dict.fromkeys(batched.stage_seconds, 0.0)
+        for _ in range(rounds):
+            actions = rng.uniform(-1, 1, (block, 6)).astype(np.float32)
+            t0 = time.perf_counter()
+            for a in actions:
+                _, _, terminated, truncated, _ = single.step(a)
+                if terminated or truncated:
+                    single.reset()
+            elapsed["single"] += time.perf_counter() - t0
+            t0 = time.perf_counter()
+            for k in range(calls):
+                batched.step(actions[k * n_worlds:(k + 1) * n_worlds])
+            elapsed["batched"] += time.perf_counter() - t0
+    finally:
+        single.close()
+        batched.close()
+    total = block * rounds
+    rates = {k: total / v for k, v in elapsed.items()}
+    stages = {k: round(v / total * 1e6, 2) for k, v in batched.stage_seconds.items()}
+    return {"robot": robot, "scenario": scenario, "n_worlds": n_worlds, "steps": total,
+            "steps_per_s": {k: round(v, 1) for k, v in rates.items()},
+            "speedup": round(rates["batched"] / rates["single"], 2), "us_per_world_step": stages}
 
 
 

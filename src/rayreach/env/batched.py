@@ -1,0 +1,374 @@
+"""The paper's MDP for N worlds in one object: ``ReachEnv``'s step, each stage computed for all
+worlds at once.
+
+``BatchedReachEnv(robot, n_worlds)`` is a stable-baselines3 ``VecEnv``: the same observation
+(142 values, same order), action, reward terms, episode ends and seeding as N ``ReachEnv``
+objects, world ``i`` seeded as ``ReachEnv.reset(seed=seed + i)`` would be
+(``tests/test_batched_env.py`` steps both through the same worlds). A single env pays
+numpy's per-call overhead on arrays of three to six values in every part of a step; here
+each part is one call over all worlds:
+
+=================  ============================================================================
+IK                 ``sim.batch_kinematics``: Algorithm 1 per world, compiled
+obstacles          ``sim.batch_obstacles``: moving obstacles advanced for all worlds
+collision          ``sim.batch_collision``: spheres round the arm's links against each world's
+                   obstacles; PyBullet's own query only for the worlds they come near, so the
+                   answer is ``Scene.in_collision``'s
+rays               ``sim.batch_rays``: the 129 rays of every world, cast against its obstacles
+reward, end, obs   numpy over the world axis; the shaking window compiled
+=================  ============================================================================
+
+Random worlds are drawn at reset, one world at a time, by ``RandomWorlds`` in one PyBullet
+scene kept for that (what a reset costs is in docs/performance.md).
+
+``infos``: ``{}`` while a world's episode goes on (a dict per world and step would cost
+more than the step); at its end the info ``ReachEnv`` returns last, with
+``terminal_observation``, ``TimeLimit.truncated`` and ``episode_reward_terms`` (each reward
+term summed over the episode).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Sequence
+
+import time
+
+import gymnasium as gym
+import numba
+import numpy as np
+from gymnasium.utils import seeding
+from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices
+
+from rayreach.env.reach import (N_ROBOT_OBS, OBS_SIZE, REWARD_TERM_NAMES, EnvConfig, make_config, observation_space,
+                                resolve_task)
+from rayreach.scenarios import RANDOM, Scenario
+from rayreach.scenarios.feasibility import solve_start, validate
+from rayreach.scenarios.random_world import RandomWorlds
+from rayreach.sim.batch_collision import ArmSpheres, CollisionWorlds, candidates
+from rayreach.sim.batch_kinematics import ChainArrays, solve_steps
+from rayreach.sim.batch_obstacles import ObstacleBatch
+from rayreach.sim.batch_rays import RayArrays, cast_worlds
+from rayreach.sim.kinematics import Kinematics
+from rayreach.sim.scene import Scene
+from rayreach.sim.sensors import N_RAYS, RayModel
+
+SHAKE_WINDOW = 10
+"""Movements the shaking counter compares (``rewards.ShakeCounter``'s window)."""
+
+STAGES = ("ik", "obstacles", "collision_spheres", "collision_bullet", "rays", "reward_and_obs", "resets")
+"""The parts of a step ``stage_seconds`` times (docs/performance.md)."""
+
+ENV_METHODS = ("set_goal_tolerance", "set_n_obstacles")
+"""What ``env_method`` reaches: the curricula's setters, per world."""
+
+
+class BatchedReachEnv(VecEnv):
+    """``n_worlds`` reach tasks of one robot, random worlds or one fixed scenario for all."""
+
+    def __init__(
+        self,
+        robot: str | None = None,
+        n_worlds: int = 256,
+        scenario: str | Path | Scenario = RANDOM,
+        config: EnvConfig | None = None,
+        seed: int | None = None,
+        **overrides: Any,
+    ) -> None:
+        if n_worlds < 1:
+            raise ValueError(f"n_worlds must be >= 1, got {n_worlds}")
+        self.config = cfg = make_config(config, overrides)
+        spec, fixed = resolve_task(robot, scenario)
+        self.spec_robot = spec
+        self.random = fixed is None
+        base_pos = fixed.base_position if fixed else None
+        base_rpy = fixed.base_rpy if fixed else None
+        self.kin = Kinematics(spec, base_pos, base_rpy)
+        self.scene = Scene(spec, base_pos, base_rpy)
+        """Where random worlds are drawn and checked (``RandomWorlds``), as in ``ReachEnv``."""
+        self.worlds = RandomWorlds(self.kin, self.scene, cfg.random_world) if self.random else None
+        self.chain = ChainArrays.of(self.kin)
+        self.layout = RayArrays.of(RayModel(spec, cfg.ray_range))
+        self.spheres = ArmSpheres.of(self.scene, self.kin)
+        self.collision = CollisionWorlds(spec, n_worlds, base_pos, base_rpy)
+        self.obstacles = ObstacleBatch(n_worlds)
+        n = n_worlds
+        ws_low = np.asarray(fixed.workspace_low if fixed else spec.workspace_low, dtype=float)
+        ws_high = np.asarray(fixed.workspace_high if fixed else spec.workspace_high, dtype=float)
+        self.step_scale = np.array([spec.ee_step] * 3 + [spec.rot_step] * 3)
+        self.render_mode = None
+        self.rngs: list[np.random.Generator | None] = [None] * n
+        self.n_obstacles = np.full(n, cfg.random_world.n_obstacles, dtype=np.int64)
+        self.goal_tolerance = np.full(n, cfg.goal_tolerance)
+        """The success radius each world's next episode gets (the goal-size curriculum's)."""
+        self.tolerance = np.zeros(n)
+        self.true_goal_episode = np.zeros(n, dtype=bool)
+        self.ws_low = np.tile(ws_low, (n, 1))
+        self.ws_high = np.tile(ws_high, (n, 1))
+        self.q = np.zeros((n, 6))
+        self.frames = np.zeros((n, 7, 4, 4))
+        self.ee_pos = np.zeros((n, 3))
+        self.ee_rot = np.zeros((n, 3, 3))
+        self.ref_rot_t = np.zeros((n, 3, 3))
+        self.goals = np.zeros((n, 1, 3))
+        self.n_goals = np.ones(n, dtype=np.int64)
+        self.goal_index = np.zeros(n, dtype=np.int64)
+        self.steps = np.zeros(n, dtype=np.int64)
+        self.time = np.zeros(n)
+        self.previous_distance = np.zeros(n)
+        self.shake_queue = np.zeros((n, SHAKE_WINDOW + 1))
+        self.shake_length = np.zeros(n, dtype=np.int64)
+        self.fractions = np.ones((n, N_RAYS))
+        self.episode_terms = np.zeros((n, len(REWARD_TERM_NAMES)))
+        self.converged = np.ones(n, dtype=bool)
+        self.obs = np.zeros((n, OBS_SIZE), dtype=np.float32)
+        self._all = np.arange(n)
+        self._active = np.ones(n, dtype=bool)
+        self._actions = np.zeros((n, 6))
+        self._fixed_start: np.ndarray | None = None
+        self.stage_seconds = dict.fromkeys(STAGES, 0.0)
+        """Seconds spent in each stage of ``step_wait`` so far (a few perf_counter calls a step)."""
+        if fixed is not None:
+            self._load_fixed(fixed)
+        super().__init__(n, observation_space(spec, ws_high - ws_low), gym.spaces.Box(-1.0, 1.0, (6,), np.float32))
+        if seed is not None:
+            self.seed(seed)
+
+    def _load_fixed(self, scenario: Scenario) -> None:
+        self._fixed_start = q_start = solve_start(scenario, self.kin)
+        self.scene.set_obstacles(scenario.obstacles)
+        validate(scenario, self.kin, self.scene, q_start)
+        for i in range(len(self.q)):
+            self._set_world(i, scenario)
+
+    def _set_world(self, i: int, scenario: Scenario) -> None:
+        self.obstacles.set_world(i, scenario.obstacles)
+        self.collision.set_world(i, scenario.obstacles)
+        goals = np.asarray(scenario.goals, dtype=float)
+        if len(goals) > self.goals.shape[1]:
+            grown = np.zeros((len(self.q), len(goals), 3))
+            grown[:, : self.goals.shape[1]] = self.goals
+            self.goals = grown
+        self.goals[i, : len(goals)] = goals
+        self.n_goals[i] = len(goals)
+        self.ws_low[i] = scenario.workspace_low
+        self.ws_high[i] = scenario.workspace_high
+
+    # ------------------------------------------------------------------ curricula
+    def set_goal_tolerance(self, tolerance: float, indices: VecEnvIndices = None) -> None:
+        """The success radius from each world's next episode on (goal-size curriculum)."""
+        if not tolerance > 0:
+            raise ValueError(f"goal_tolerance must be positive, got {tolerance}")
+        self.goal_tolerance[list(self._get_indices(indices))] = float(tolerance)
+
+    def set_n_obstacles(self, n: int, indices: VecEnvIndices = None) -> None:
+        """Obstacles per random world from each world's next reset on (obstacle curriculum)."""
+        if n < 0:
+            raise ValueError(f"n_obstacles must be >= 0, got {n}")
+        self.n_obstacles[list(self._get_indices(indices))] = int(n)
+
+    # ------------------------------------------------------------------ VecEnv API
+    def reset(self) -> np.ndarray:
+        for i in range(self.num_envs):
+            if self._seeds[i] is not None or self.rngs[i] is None:
+                self.rngs[i], _ = seeding.np_random(self._seeds[i])
+            self._reset_world(i)
+        self._reset_seeds()
+        self._reset_options()
+        return self.obs.copy()
+
+    def _reset_world(self, i: int) -> None:
+        """``ReachEnv.reset`` for world ``i``, its observation written into ``self.obs[i]``."""
+        cfg = self.config
+        rng = self.rngs[i]
+        assert rng is not None
+        if self.random:
+            assert self.worlds is not None
+            scenario, q_start = self.worlds.sample(rng, int(self.n_obstacles[i]))
+            self._set_world(i, scenario)
+        else:
+            assert self._fixed_start is not None
+            q_start = self._fixed_start
+            for rows in (self.obstacles.boxes, self.obstacles.spheres):
+                rows.pos[i] = rows.start[i]
+        share = cfg.true_goal_share if self.random else 0.0
+        self.true_goal_episode[i] = share > 0 and bool(rng.random() < share)
+        self.tolerance[i] = cfg.true_goal_tolerance if self.true_goal_episode[i] else self.goal_tolerance[i]
+        self.q[i] = q_start
+        self.frames[i] = self.kin.frames(self.q[i])
+        ee = self.kin.ee_from_frames(self.frames[i])
+        self.ee_pos[i], self.ee_rot[i] = ee[:3, 3], ee[:3, :3]
+        self.ref_rot_t[i] = self.ee_rot[i].T
+        self.goal_index[i] = 0
+        self.steps[i] = 0
+        self.time[i] = 0.0
+        self.shake_length[i] = 0
+        self.episode_terms[i] = 0.0
+        self.previous_distance[i] = float(np.linalg.norm(self.goals[i, 0] - self.ee_pos[i]))
+        cast_worlds(self.layout, self.frames, self.obstacles, cfg.ray_range, np.array([i]), self.fractions)
+        self._observe(np.array([i]), self.previous_distance)
+
+    def step_async(self, actions: np.ndarray) -> None:
+        a = np.asarray(actions, dtype=float).reshape(self.num_envs, -1)
+        if a.shape[1] != 6:
+            raise ValueError(f"actions must be ({self.num_envs}, 6) (dx, dy, dz, droll, dpitch, dyaw), "
+                             f"got shape {np.shape(actions)}")
+        if not np.all(np.isfinite(a)):
+            raise ValueError(f"actions of worlds {np.flatnonzero(~np.isfinite(a).all(axis=1)).tolist()} "
+                             "contain NaN or infinity")
+        np.multiply(np.clip(a, -1.0, 1.0), self.step_scale, out=self._actions)
+
+    def step_wait(self):
+        cfg, w = self.config, self.config.rewards
+        clock = _Clock(self.stage_seconds)
+        solve_steps(self.chain, cfg.ik, self._actions, self.q, self.frames, self.ee_pos, self.ee_rot, self._active,
+                    self.converged)
+        clock.lap("ik")
+        self.steps += 1
+        self.time = self.steps * cfg.control_period
+        if self.obstacles.moving.any():
+            self.obstacles.at_time(self.time)
+        clock.lap("obstacles")
+        collided = np.zeros(self.num_envs, dtype=bool)
+        near = np.flatnonzero(candidates(self.frames, self.spheres, self.obstacles))
+        clock.lap("collision_spheres")
+        for i in near:
+            collided[i] = self.collision.in_collision(int(i), self.q[i], float(self.time[i]))
+        clock.lap("collision_bullet")
+        outside = ~((self.ee_pos >= self.ws_low) & (self.ee_pos <= self.ws_high)).all(axis=1)
+        distance = _distances(self.goals[self._all, self.goal_index] - self.ee_pos)
+        reached = distance < self.tolerance
+        n_shakes = _shake(self.shake_queue, self.shake_length, distance, SHAKE_WINDOW)
+        clock.lap("reward_and_obs")
+        cast_worlds(self.layout, self.frames, self.obstacles, cfg.ray_range, self._all, self.fractions)
+        clock.lap("rays")
+
+        final_goal = self.goal_index == self.n_goals - 1
+        success = reached & final_goal & ~collided
+        terminated = collided | outside | success
+        truncated = ~terminated & (self.steps >= cfg.max_steps)
+        terms = np.empty((self.num_envs, len(REWARD_TERM_NAMES)))  # REWARD_TERM_NAMES order
+        terms[:, 0] = np.where(collided, 0.0, np.where(reached, w.success, 0.0))
+        terms[:, 1] = np.where(collided, w.collision, 0.0)
+        terms[:, 2] = w.distance * distance
+        terms[:, 3] = w.shaking * n_shakes
+        terms[:, 4] = np.where(outside, w.out_of_bounds, 0.0)
+        terms[:, 5] = np.where(truncated, w.exhausted, 0.0)
+        terms[:, 6] = w.progress * (self.previous_distance - distance)
+        terms[:, 7] = w.proximity * np.maximum(0.0, 1.0 - self.fractions.min(axis=1) / w.proximity_range)
+        rewards = terms[:, 0].copy()
+        for k in range(1, terms.shape[1]):  # summed in ReachEnv's order, to the last bit
+            rewards += terms[:, k]
+        self.episode_terms += terms
+
+        switch = np.flatnonzero(reached & ~final_goal)
+        if len(switch):
+            self.goal_index[switch] += 1
+            self.shake_length[switch] = 0
+            distance[switch] = _distances(self.goals[switch, self.goal_index[switch]] - self.ee_pos[switch])
+        self.previous_distance = distance
+        self._observe(self._all, distance)
+
+        dones = terminated | truncated
+        clock.lap("reward_and_obs")
+        infos: list[dict[str, Any]] = [{} for _ in range(self.num_envs)]
+        for i in np.flatnonzero(dones):
+            infos[i] = {
+                "reward_terms": dict(zip(REWARD_TERM_NAMES, terms[i].tolist())),
+                "episode_reward_terms": dict(zip(REWARD_TERM_NAMES, self.episode_terms[i].tolist())),
+                "distance": float(distance[i]),
+                "is_success": bool(success[i]),
+                "collision": bool(collided[i]),
+                "out_of_bounds": bool(outside[i]),
+                "goal_reached": bool(reached[i]),
+                "goal_tolerance": float(self.tolerance[i]),
+                "true_goal_episode": bool(self.true_goal_episode[i]),
+                "goal_index": int(self.goal_index[i]),
+                "ee_position": self.ee_pos[i].copy(),
+                "goal": self.goals[i, self.goal_index[i]].copy(),
+                "ik_converged": bool(self.converged[i]),
+                "n_shakes": int(n_shakes[i]),
+                "time": float(self.time[i]),
+                "TimeLimit.truncated": bool(truncated[i]),
+                "terminal_observation": self.obs[i].copy(),
+            }
+            self._reset_world(int(i))
+        clock.lap("resets")
+        return self.obs.copy(), rewards.astype(np.float32), dones, infos
+
+    def _observe(self, which: np.ndarray, distance: np.ndarray) -> None:
+        obs = self.obs
+        obs[which, 0:6] = self.q[which]
+        obs[which, 6:9] = self.goals[which, self.goal_index[which]] - self.ee_pos[which]
+        obs[which, 9:12] = _rpy(np.matmul(self.ref_rot_t[which], self.ee_rot[which]))
+        obs[which, 12] = distance[which]
+        obs[which, N_ROBOT_OBS:] = self.fractions[which]
+
+    def close(self) -> None:
+        self.scene.close()
+        self.collision.close()
+
+    def get_attr(self, attr_name: str, indices: VecEnvIndices = None) -> list[Any]:
+        value = getattr(self, attr_name)
+        return [value for _ in self._get_indices(indices)]
+
+    def set_attr(self, attr_name: str, value: Any, indices: VecEnvIndices = None) -> None:
+        raise AttributeError(f"BatchedReachEnv's worlds share their attributes; set '{attr_name}' on the env itself")
+
+    def env_method(self, method_name: str, *method_args, indices: VecEnvIndices = None, **method_kwargs) -> list[Any]:
+        if method_name not in ENV_METHODS:
+            raise AttributeError(f"BatchedReachEnv has no per-world method '{method_name}'; it has {', '.join(ENV_METHODS)}")
+        getattr(self, method_name)(*method_args, indices=indices, **method_kwargs)
+        return [None for _ in self._get_indices(indices)]
+
+    def env_is_wrapped(self, wrapper_class: type[gym.Wrapper], indices: VecEnvIndices = None) -> list[bool]:
+        return [False for _ in self._get_indices(indices)]
+
+
+class _Clock:
+    """Adds the seconds since the last lap to a stage's total."""
+
+    def __init__(self, totals: dict[str, float]) -> None:
+        self.totals = totals
+        self.last = time.perf_counter()
+
+    def lap(self, stage: str) -> None:
+        now = time.perf_counter()
+        self.totals[stage] += now - self.last
+        self.last = now
+
+
+def _distances(offsets: np.ndarray) -> np.ndarray:
+    return np.sqrt(np.einsum("ij,ij->i", offsets, offsets))
+
+
+def _rpy(rot: np.ndarray) -> np.ndarray:
+    """``transforms.matrix_to_rpy`` of each of ``rot`` (n, 3, 3)."""
+    sin_pitch = -rot[:, 2, 0]
+    pitch = np.arcsin(np.clip(sin_pitch, -1.0, 1.0))
+    locked = np.abs(rot[:, 2, 0]) >= 1.0 - 1e-12
+    roll = np.where(locked, 0.0, np.arctan2(rot[:, 2, 1], rot[:, 2, 2]))
+    yaw = np.where(locked, np.arctan2(-rot[:, 0, 1], rot[:, 1, 1]), np.arctan2(rot[:, 1, 0], rot[:, 0, 0]))
+    return np.stack((roll, pitch, yaw), axis=1)
+
+
+@numba.njit(cache=True)
+def _shake(queue, length, distance, window):  # pragma: no cover - compiled
+    """``ShakeCounter.update`` for every world: n_s after appending ``distance``."""
+    out = np.zeros(len(distance), dtype=np.int64)
+    for w in range(len(distance)):
+        if length[w] > window:
+            for k in range(length[w] - 1):
+                queue[w, k] = queue[w, k + 1]
+            length[w] -= 1
+        queue[w, length[w]] = distance[w]
+        length[w] += 1
+        count = 0
+        previous = -1
+        for k in range(length[w] - 1):
+            label = 0 if queue[w, k + 1] - queue[w, k] >= 0 else 1
+            if previous >= 0 and label != previous:
+                count += 1
+            previous = label
+        out[w] = count
+    return out

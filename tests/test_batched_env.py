@@ -1,0 +1,149 @@
+"""The batched environment is N ``ReachEnv``s: same observations, rewards and episode ends."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from rayreach.env.batched import BatchedReachEnv
+from rayreach.env.reach import ReachEnv, episode_outcome
+from rayreach.scenarios.schema import ObstacleSpec
+from rayreach.sim.batch_obstacles import ObstacleBatch
+
+SEED = 100
+
+
+def _towards_goal(obs: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """Actions that head for the goal through the obstacles, with noise: episodes end in every way."""
+    drive = np.clip(obs[:, 6:9] / 0.005, -1, 1)
+    noise = rng.normal(0.0, 0.6, (len(obs), 6))
+    return np.clip(np.concatenate((drive, np.zeros((len(obs), 3))), axis=1) + noise, -1, 1).astype(np.float32)
+
+
+def _compare(robot: str, scenario: str, n_worlds: int, episodes: int, **overrides) -> dict[str, int]:
+    """Step both through the same worlds and actions until ``episodes`` episodes ended; every
+    observation, reward and episode end must agree. Returns the episode outcomes."""
+    batched = BatchedReachEnv(robot, n_worlds, scenario, seed=SEED, **overrides)
+    singles = [ReachEnv(robot=robot, scenario=scenario, **overrides) for _ in range(n_worlds)]
+    rng = np.random.default_rng(0)
+    outcomes: dict[str, int] = {}
+    try:
+        obs = batched.reset()
+        single_obs = np.array([env.reset(seed=SEED + i)[0] for i, env in enumerate(singles)])
+        np.testing.assert_allclose(obs, single_obs, atol=1e-6, rtol=0)
+        while sum(outcomes.values()) < episodes:
+            actions = _towards_goal(obs, rng)
+            obs, rewards, dones, infos = batched.step(actions)
+            for i, env in enumerate(singles):
+                o, r, terminated, truncated, info = env.step(actions[i])
+                assert dones[i] == (terminated or truncated), f"world {i}: episode end differs"
+                assert abs(float(rewards[i]) - r) <= 1e-6 * max(1.0, abs(r)), f"world {i}: reward {rewards[i]} vs {r}"
+                if dones[i]:
+                    last = infos[i]
+                    np.testing.assert_allclose(last["terminal_observation"], o, atol=1e-6, rtol=0)
+                    assert episode_outcome(last) == episode_outcome(info)
+                    assert last["TimeLimit.truncated"] == (truncated and not terminated)
+                    for key, value in info["episode_reward_terms"].items():
+                        assert last["episode_reward_terms"][key] == pytest.approx(value, abs=1e-6)
+                    outcomes[episode_outcome(info)] = outcomes.get(episode_outcome(info), 0) + 1
+                    o, _ = env.reset()
+                else:
+                    assert infos[i] == {}
+                np.testing.assert_allclose(obs[i], o, atol=1e-6, rtol=0, err_msg=f"world {i}")
+    finally:
+        batched.close()
+        for env in singles:
+            env.close()
+    return outcomes
+
+
+@pytest.mark.parametrize("robot", ["ur5", "kr16"])
+def test_random_worlds_step_as_reach_env_does(robot):
+    """>= 100 episodes per robot on random worlds of 3 obstacles (moving plates, the KR16's
+    shelf), ended by success, collision, leaving the workspace and the step budget."""
+    outcomes = _compare(robot, "random", 16, 100, max_steps=100, goal_tolerance=0.1)
+    assert sum(outcomes.values()) >= 100
+    assert {"success", "collision", "timeout"} <= set(outcomes), outcomes
+
+
+@pytest.mark.parametrize("scenario", ["exp2", "exp4"])
+def test_fixed_scenarios_step_as_reach_env_does(scenario):
+    outcomes = _compare(None, scenario, 4, 12, max_steps=150)
+    assert sum(outcomes.values()) >= 12
+
+
+def test_ppo_learns_on_it():
+    from stable_baselines3 import PPO
+
+    env = BatchedReachEnv("ur5", 8, seed=0, max_steps=20)
+    try:
+        model = PPO("MlpPolicy", env, n_steps=8, batch_size=32, n_epochs=1, seed=0)
+        model.learn(64)
+        assert model.num_timesteps == 64
+    finally:
+        env.close()
+
+
+def test_curriculum_setters_reach_the_next_episode():
+    env = BatchedReachEnv("ur5", 2, seed=0, max_steps=3)
+    try:
+        env.reset()
+        env.env_method("set_goal_tolerance", 0.07)
+        env.env_method("set_n_obstacles", 1, indices=[1])
+        for _ in range(3):
+            _, _, dones, infos = env.step(np.zeros((2, 6), dtype=np.float32))
+        assert dones.all() and infos[0]["goal_tolerance"] != 0.07  # the episode that ended kept its own
+        assert env.tolerance.tolist() == [0.07, 0.07]
+        assert env.obstacles.boxes.count[1] + env.obstacles.spheres.count[1] <= 2  # a goal slot is two plates
+        with pytest.raises(AttributeError, match="set_goal_tolerance"):
+            env.env_method("render")
+    finally:
+        env.close()
+
+
+def test_bad_actions_and_shapes_are_refused():
+    env = BatchedReachEnv("ur5", 2, seed=0)
+    try:
+        env.reset()
+        with pytest.raises(ValueError, match=r"\(2, 6\)"):
+            env.step(np.zeros((2, 5), dtype=np.float32))
+        bad = np.zeros((2, 6), dtype=np.float32)
+        bad[1, 2] = np.nan
+        with pytest.raises(ValueError, match=r"worlds \[1\]"):
+            env.step(bad)
+    finally:
+        env.close()
+
+
+def test_obstacle_batch_moves_as_obstacle_spec_does():
+    plate = ObstacleSpec("box", (0.3, 0.2, 0.5), half_extents=(0.05, 0.05, 0.002), velocity=(0.1, -0.05, 0.0),
+                         travel=0.2)
+    ball = ObstacleSpec("sphere", (0.0, 0.4, 0.6), radius=0.04, velocity=(0.0, 0.0, 0.15))
+    batch = ObstacleBatch(3)
+    batch.set_world(1, [plate, ball])
+    times = np.array([0.0, 3.7, 0.0])
+    batch.at_time(times)
+    np.testing.assert_allclose(batch.boxes.pos[1, 0], plate.position_at(3.7), atol=1e-12)
+    np.testing.assert_allclose(batch.spheres.pos[1, 0], ball.position_at(3.7), atol=1e-12)
+    assert batch.boxes.count.tolist() == [0, 1, 0]
+    with pytest.raises(ValueError, match="box and sphere"):
+        batch.set_world(0, [ObstacleSpec("cylinder", (0, 0, 0), radius=0.1, height=0.2)])
+
+
+def test_gymnasium_make_vec_gives_the_batched_worlds():
+    import gymnasium as gym
+
+    import rayreach  # noqa: F401  (registers the ids)
+
+    envs = gym.make_vec("rayreach/Reach-UR5-v0", num_envs=3, vectorization_mode="vector_entry_point", max_steps=4)
+    try:
+        obs, _ = envs.reset(seed=SEED)
+        single = ReachEnv(robot="ur5", scenario="random")
+        np.testing.assert_allclose(obs[2], single.reset(seed=SEED + 2)[0], atol=1e-6)
+        single.close()
+        for _ in range(4):
+            obs, rewards, terminated, truncated, infos = envs.step(np.zeros((3, 6), dtype=np.float32))
+        assert obs.shape == (3, 142) and (terminated | truncated).all()
+        assert infos["_final_obs"].all() and infos["final_obs"][0].shape == (142,)
+    finally:
+        envs.close()
