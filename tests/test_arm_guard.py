@@ -11,7 +11,8 @@ import pytest
 
 from exp1_scenes import layers
 from rayreach.acting import ActingEnv
-from rayreach.acting.arm_guard import PAD, PROBE, VOXEL, ArmCapsules, _capsule, _first_per_cell
+from rayreach.acting.arm_guard import PAD, PROBE, VOXEL, ArmCapsules, _first_per_cell
+from rayreach.sim.geometry import capsule_around
 from rayreach.acting.controller import SHORTER
 from rayreach.acting.layers import ArmRule
 from rayreach.acting.memory import RayMemory
@@ -28,7 +29,7 @@ def test_a_fitted_capsule_holds_a_cylinders_points_and_no_more_than_needed():
     angle = np.linspace(0, 2 * np.pi, 24, endpoint=False)
     ring = np.stack([0.05 * np.cos(angle), 0.05 * np.sin(angle), np.zeros_like(angle)], axis=1)
     cylinder = np.concatenate([ring, ring + [0.0, 0.0, 0.3]])
-    a, b, radius = _capsule(cylinder)
+    a, b, radius = capsule_around(cylinder)
     assert radius == pytest.approx(0.05, abs=1e-9)
     assert sorted([a[2], b[2]]) == pytest.approx([0.0, 0.3])
 

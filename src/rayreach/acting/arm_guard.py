@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 import pybullet as p
 
-from rayreach.sim.geometry import distances_to_segment
+from rayreach.sim.geometry import capsule_around, distances_to_segment
 from rayreach.robots.urdf import TOOL_LINK
 from rayreach.sim.scene import Scene
 from rayreach.sim.voxels import cell_keys
@@ -31,16 +31,6 @@ PROBE = 1e-4
 PAD = 0.002
 """How much nearer than a capsule says, m, PyBullet may measure a point: it pads its meshes
 by about a millimetre (``tests/test_arm_guard.py``)."""
-
-
-def _capsule(vertices: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
-    """The capsule (segment ends a, b and radius) around ``vertices`` along their principal
-    axis: it holds every vertex, hence the convex mesh they span."""
-    centre = vertices.mean(axis=0)
-    axis = np.linalg.svd(vertices - centre, full_matrices=False)[2][0]
-    along = (vertices - centre) @ axis
-    a, b = centre + along.min() * axis, centre + along.max() * axis
-    return a, b, float(distances_to_segment(vertices, a, b - a).max())
 
 
 class ArmCapsules:
@@ -61,7 +51,7 @@ class ArmCapsules:
             count, vertices = p.getMeshData(scene.robot, index, physicsClientId=scene.client)
             if count < 4:
                 raise ValueError(f"link '{name}' of '{scene.spec.name}' has no collision mesh to wrap")
-            a, b, r = _capsule(np.asarray(vertices, dtype=float))
+            a, b, r = capsule_around(np.asarray(vertices, dtype=float))
             self.links.append(index)
             ends.append((a, b))
             radii.append(r)

@@ -233,7 +233,7 @@ class BatchedReachEnv(VecEnv):
         near = np.flatnonzero(candidates(self.frames, self.spheres, self.obstacles))
         clock.lap("collision_spheres")
         for i in near:
-            collided[i] = self.collision.in_collision(int(i), self.q[i], float(self.time[i]))
+            collided[i] = self.collision.in_collision(int(i), self.q[i], float(self.time[i]), self.frames[i])
         clock.lap("collision_bullet")
         outside = ~((self.ee_pos >= self.ws_low) & (self.ee_pos <= self.ws_high)).all(axis=1)
         distance = _distances(self.goals[self._all, self.goal_index] - self.ee_pos)

@@ -1,5 +1,6 @@
-"""Distances from points to segments and parallelograms: how the acting layers measure the tool
-and the arm against what the rays hit."""
+"""Distances from points to segments and parallelograms, and capsules round point sets: how the
+acting layers measure the tool and the arm against what the rays hit, and how the batched
+collision test bounds the arm's links."""
 
 from __future__ import annotations
 
@@ -26,3 +27,13 @@ def distances_to_parallelogram(points: np.ndarray, u: np.ndarray, v: np.ndarray)
             foot = st[0, inside, None] * u + st[1, inside, None] * v
             best[inside] = np.linalg.norm(points[inside] - foot, axis=1)
     return best
+
+
+def capsule_around(vertices: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """The capsule (segment ends a, b and radius) around ``vertices`` along their principal
+    axis: it holds every vertex, hence the convex mesh they span."""
+    centre = vertices.mean(axis=0)
+    axis = np.linalg.svd(vertices - centre, full_matrices=False)[2][0]
+    along = (vertices - centre) @ axis
+    a, b = centre + along.min() * axis, centre + along.max() * axis
+    return a, b, float(distances_to_segment(vertices, a, b - a).max())
