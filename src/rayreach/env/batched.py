@@ -18,8 +18,9 @@ rays               ``sim.batch_rays``: the 129 rays of every world, cast against
 reward, end, obs   numpy over the world axis; the shaking window compiled
 =================  ============================================================================
 
-Random worlds are drawn at reset, one world at a time, by ``RandomWorlds`` in one PyBullet
-scene kept for that (what a reset costs is in docs/performance.md).
+Random worlds are drawn at reset, one world at a time, by ``RandomWorlds``, checked where
+the world is then tested (``CollisionWorlds.slot``: no PyBullet bodies, whose making is
+most of what a single env's draw costs; docs/performance.md).
 
 ``infos``: ``{}`` while a world's episode goes on (a dict per world and step would cost
 more than the step); at its end the info ``ReachEnv`` returns last, with
@@ -45,7 +46,7 @@ from rayreach.env.reach import (N_ROBOT_OBS, OBS_SIZE, REWARD_TERM_NAMES, EnvCon
 from rayreach.scenarios import RANDOM, Scenario
 from rayreach.scenarios.feasibility import solve_start, validate
 from rayreach.scenarios.random_world import RandomWorlds
-from rayreach.sim.batch_collision import ArmSpheres, CollisionWorlds, candidates
+from rayreach.sim.batch_collision import CollisionWorlds, candidates
 from rayreach.sim.batch_kinematics import ChainArrays, solve_steps
 from rayreach.sim.batch_obstacles import ObstacleBatch
 from rayreach.sim.batch_rays import RayArrays, cast_worlds
@@ -84,13 +85,13 @@ class BatchedReachEnv(VecEnv):
         base_pos = fixed.base_position if fixed else None
         base_rpy = fixed.base_rpy if fixed else None
         self.kin = Kinematics(spec, base_pos, base_rpy)
-        self.scene = Scene(spec, base_pos, base_rpy)
-        """Where random worlds are drawn and checked (``RandomWorlds``), as in ``ReachEnv``."""
-        self.worlds = RandomWorlds(self.kin, self.scene, cfg.random_world) if self.random else None
         self.chain = ChainArrays.of(self.kin)
         self.layout = RayArrays.of(RayModel(spec, cfg.ray_range))
-        self.spheres = ArmSpheres.of(self.scene, self.kin)
         self.collision = CollisionWorlds(spec, n_worlds, base_pos, base_rpy)
+        self.spheres = self.collision.spheres
+        self.samplers = [RandomWorlds(self.kin, self.collision.slot(i), cfg.random_world)
+                         for i in range(n_worlds)] if self.random else []
+        """World ``i`` is drawn where it is tested, as ``ReachEnv`` draws in its scene."""
         self.obstacles = ObstacleBatch(n_worlds)
         n = n_worlds
         ws_low = np.asarray(fixed.workspace_low if fixed else spec.workspace_low, dtype=float)
@@ -136,14 +137,19 @@ class BatchedReachEnv(VecEnv):
 
     def _load_fixed(self, scenario: Scenario) -> None:
         self._fixed_start = q_start = solve_start(scenario, self.kin)
-        self.scene.set_obstacles(scenario.obstacles)
-        validate(scenario, self.kin, self.scene, q_start)
+        scene = Scene(self.spec_robot, scenario.base_position, scenario.base_rpy)
+        try:
+            scene.set_obstacles(scenario.obstacles)
+            validate(scenario, self.kin, scene, q_start)
+        finally:
+            scene.close()
         for i in range(len(self.q)):
+            self.collision.set_world(i, scenario.obstacles)
             self._set_world(i, scenario)
 
     def _set_world(self, i: int, scenario: Scenario) -> None:
+        """World ``i``'s scenario into the arrays (``CollisionWorlds`` has its obstacles)."""
         self.obstacles.set_world(i, scenario.obstacles)
-        self.collision.set_world(i, scenario.obstacles)
         goals = np.asarray(scenario.goals, dtype=float)
         if len(goals) > self.goals.shape[1]:
             grown = np.zeros((len(self.q), len(goals), 3))
@@ -183,8 +189,7 @@ class BatchedReachEnv(VecEnv):
         rng = self.rngs[i]
         assert rng is not None
         if self.random:
-            assert self.worlds is not None
-            scenario, q_start = self.worlds.sample(rng, int(self.n_obstacles[i]))
+            scenario, q_start = self.samplers[i].sample(rng, int(self.n_obstacles[i]))
             self._set_world(i, scenario)
         else:
             assert self._fixed_start is not None
@@ -305,7 +310,6 @@ class BatchedReachEnv(VecEnv):
         obs[which, N_ROBOT_OBS:] = self.fractions[which]
 
     def close(self) -> None:
-        self.scene.close()
         self.collision.close()
 
     def get_attr(self, attr_name: str, indices: VecEnvIndices = None) -> list[Any]:

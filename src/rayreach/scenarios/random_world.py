@@ -9,13 +9,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Protocol, Sequence
 
 import numpy as np
 
 from rayreach.sim.kinematics import IKParams, Kinematics
 from rayreach.scenarios.feasibility import goal_configuration
 from rayreach.scenarios.schema import ObstacleSpec, Scenario, StartSpec
-from rayreach.sim.scene import Scene
 from rayreach.sim.transforms import rpy_to_matrix
 
 KINDS = ("plate", "moving_plate", "box", "sphere", "shelf", "goal_cover", "goal_wall", "goal_slot")
@@ -94,10 +94,23 @@ def shelf_boxes(
     return boxes, centres
 
 
+class WorldChecker(Protocol):
+    """Where a drawn world is checked: a ``Scene``, or one world of the batched env's
+    ``CollisionWorlds`` (``WorldSlot``); both answer as PyBullet's contact query does."""
+
+    def set_obstacles(self, obstacles: Sequence[ObstacleSpec]) -> None: ...
+
+    def set_joints(self, q: Sequence[float]) -> None: ...
+
+    def in_collision(self) -> bool: ...
+
+    def clearance(self, within: float) -> float: ...
+
+
 class RandomWorlds:
     """Draws random scenarios for one robot, checking them in ``scene`` (which it modifies)."""
 
-    def __init__(self, kin: Kinematics, scene: Scene, config: RandomWorldConfig = RandomWorldConfig()) -> None:
+    def __init__(self, kin: Kinematics, scene: WorldChecker, config: RandomWorldConfig = RandomWorldConfig()) -> None:
         self.kin = kin
         self.scene = scene
         self.config = config

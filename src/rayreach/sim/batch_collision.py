@@ -219,21 +219,29 @@ SHAPES_PER_CLIENT = 100_000
 about 2.5 kB each; ``CollisionWorlds`` starts a fresh client after making this many."""
 
 
+def _shape(obstacle: ObstacleSpec, client: int) -> int:
+    """The collision shape of a box or sphere, as ``Scene._create_obstacle`` makes it."""
+    if obstacle.shape == "box":
+        return p.createCollisionShape(p.GEOM_BOX, halfExtents=list(obstacle.half_extents), physicsClientId=client)
+    return p.createCollisionShape(p.GEOM_SPHERE, radius=obstacle.radius, physicsClientId=client)
+
+
 class _World:
     """One world's obstacles in ``CollisionWorlds``: PyBullet collision shapes (no bodies)
     and the arrays ``_near`` reads."""
 
-    def __init__(self, obstacles: Sequence[ObstacleSpec], client: int, n_links: int) -> None:
+    def __init__(self, obstacles: Sequence[ObstacleSpec], client: int, n_links: int,
+                 made: dict[int, int] | None = None) -> None:
+        """``made``: shapes already made in ``client``, by ``id`` of the obstacle they were
+        made for (a random world's draw asks twice about the same obstacles)."""
+        made = made or {}
         unknown = sorted({o.shape for o in obstacles} - set(BATCH_SHAPES))
         if unknown:
             raise ValueError(f"CollisionWorlds handles {' and '.join(BATCH_SHAPES)} obstacles, "
                              f"not {', '.join(unknown)}")
         self.obstacles = list(obstacles)
-        self.shapes = [  # as Scene._create_obstacle makes them
-            p.createCollisionShape(p.GEOM_BOX, halfExtents=list(o.half_extents), physicsClientId=client)
-            if o.shape == "box"
-            else p.createCollisionShape(p.GEOM_SPHERE, radius=o.radius, physicsClientId=client)
-            for o in obstacles]
+        self.shapes = [made[id(o)] if id(o) in made else _shape(o, client) for o in obstacles]
+        self.new_shapes = sum(id(o) not in made for o in obstacles)
         self.orientation = [p.getQuaternionFromEuler(o.rpy) for o in obstacles]
         self.moving = [k for k, o in enumerate(obstacles) if o.moving]
         n = len(obstacles)
@@ -263,7 +271,7 @@ class CollisionWorlds:
                  base_rpy: Sequence[float] | None = None) -> None:
         self._scene_args = (spec, base_position, base_rpy)
         self._scene = Scene(spec, base_position, base_rpy)
-        kin = Kinematics(spec, *(None if v is None else tuple(v) for v in (base_position, base_rpy)))
+        self.kin = kin = Kinematics(spec, *(None if v is None else tuple(v) for v in (base_position, base_rpy)))
         self.spheres = ArmSpheres.of(self._scene, kin)
         self._links = [int(link) for link in self.spheres.links]
         self._bound_frame = self.spheres.bound_frame
@@ -275,10 +283,28 @@ class CollisionWorlds:
 
     def set_world(self, world: int, obstacles: Sequence[ObstacleSpec]) -> None:
         """Replace world ``world``'s obstacles (boxes and spheres, as ``ObstacleBatch``)."""
+        old = self._worlds[world]
+        made = dict(zip(map(id, old.obstacles), old.shapes))
         if self._made + len(obstacles) > SHAPES_PER_CLIENT:
             self._restart()
-        self._worlds[world] = _World(obstacles, self._scene.client, len(self._links))
-        self._made += len(obstacles)
+            made = {}
+        self._worlds[world] = new = _World(obstacles, self._scene.client, len(self._links), made)
+        self._made += new.new_shapes
+
+    def slot(self, world: int) -> "WorldSlot":
+        """World ``world`` as a ``Scene`` that random worlds are drawn in (``RandomWorlds``)."""
+        return WorldSlot(self, world)
+
+    def clearance(self, world: int, q: Sequence[float], within: float) -> float:
+        """``Scene.clearance`` of world ``world`` at time 0 with the robot at joints ``q``."""
+        cid, robot = self._scene.client, self._scene.robot
+        w = self._worlds[world]
+        self._scene.set_joints(q)
+        distances = [c[8] for k, o in enumerate(w.obstacles)
+                     for c in p.getClosestPoints(robot, -1, within, collisionShapeB=w.shapes[k],
+                                                 collisionShapePositionB=list(o.position),
+                                                 collisionShapeOrientationB=w.orientation[k], physicsClientId=cid)]
+        return min(distances, default=within)
 
     def _restart(self) -> None:
         """A fresh client with every world's obstacles, to give back the memory of old shapes."""
@@ -313,6 +339,29 @@ class CollisionWorlds:
             if any(c[8] < 0.0 for c in close):
                 return True
         return False
+
+
+class WorldSlot:
+    """One world of a ``CollisionWorlds`` with the four calls ``RandomWorlds`` makes of a
+    ``Scene`` (``random_world.WorldChecker``): a world is drawn where the batched env will
+    test it, without PyBullet bodies, whose making costs most of a ``Scene``'s draw."""
+
+    def __init__(self, worlds: CollisionWorlds, index: int) -> None:
+        self.worlds = worlds
+        self.index = index
+        self.q = np.zeros(6)
+
+    def set_obstacles(self, obstacles: Sequence[ObstacleSpec]) -> None:
+        self.worlds.set_world(self.index, obstacles)
+
+    def set_joints(self, q: Sequence[float]) -> None:
+        self.q = np.asarray(q, dtype=float)
+
+    def in_collision(self) -> bool:
+        return self.worlds.in_collision(self.index, self.q, 0.0, self.worlds.kin.frames(self.q))
+
+    def clearance(self, within: float) -> float:
+        return self.worlds.clearance(self.index, self.q, within)
 
 
 # ---------------------------------------------------------------------- compiled parts
