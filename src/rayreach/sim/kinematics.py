@@ -1,5 +1,5 @@
 """Forward kinematics from the DH table (paper eqs. 1-2), the geometric Jacobian and
-damped-least-squares inverse kinematics (paper Algorithm 1), in numpy.
+damped-least-squares inverse kinematics (paper Algorithm 1): numpy, the IK iterations compiled.
 
 Frames are in the world: the robot's base pose and the fixed URDF-to-DH rotation of its
 spec are folded into frame 0, and the tool offset into the end-effector frame, so
@@ -13,7 +13,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from rayreach.robots.spec import RobotSpec
-from rayreach.sim.transforms import matrix_to_rotvec, pose_matrix, rpy_to_matrix
+from rayreach.sim.ik_kernel import ik_kernel
+from rayreach.sim.transforms import pose_matrix, rpy_to_matrix
 
 
 @dataclass(frozen=True)
@@ -150,48 +151,22 @@ class Kinematics:
         Never raises on failure: ``converged`` tells whether ``q`` meets the tolerance.
         ``start_frames`` may pass ``frames(q_start)`` when the caller has them already (the
         hot path of the environment); ``q_start`` must then lie within the joint limits.
+        The iterations run compiled (``rayreach.sim.ik_kernel``), on the same forward
+        kinematics and Jacobian as ``frames`` and ``jacobian``.
         """
         target_position = np.asarray(target_position, dtype=float)
         position_only = target_rotation is None
-        lower, upper = self.lower, self.upper
         if start_frames is None:
-            q = np.minimum(np.maximum(np.asarray(q_start, dtype=float), lower), upper)
+            q = np.minimum(np.maximum(np.asarray(q_start, dtype=float), self.lower), self.upper)
             frames = self.frames(q)
         else:
-            q, frames = np.asarray(q_start, dtype=float), start_frames
-        gain = params.delta_int / params.delta_dif
-        rows = 3 if position_only else 6
-        eye = self._eye[rows]
-        damping2 = params.damping**2
-        scale = params.damping_scale
-        error = self._pose_error(frames, target_position, target_rotation)
-        norm = float(np.sqrt(error @ error))
-        iterations = 0
-        while True:  # do ... while ||x_e|| > epsilon
-            jac = self.jacobian(frames)[:rows]
-            lam2 = damping2 if scale is None or norm >= scale else damping2 * norm / scale
-            qdot = jac.T @ np.linalg.solve(jac @ jac.T + lam2 * eye, error)
-            q = np.minimum(np.maximum(q + gain * qdot, lower), upper)
-            frames = self.frames(q)
-            error = self._pose_error(frames, target_position, target_rotation)
-            iterations += 1
-            norm = float(np.sqrt(error @ error))
-            if norm <= params.tolerance or iterations >= params.max_iterations:
-                break
-        return IKResult(
-            q=q,
-            converged=norm <= params.tolerance,
-            iterations=iterations,
-            position_error=float(np.sqrt(error[:3] @ error[:3])),
-            orientation_error=0.0 if position_only else float(np.sqrt(error[3:] @ error[3:])),
-            frames=frames,
-        )
-
-    def _pose_error(
-        self, frames: np.ndarray, target_position: np.ndarray, target_rotation: np.ndarray | None
-    ) -> np.ndarray:
-        ee = self.ee_from_frames(frames)
-        dp = target_position - ee[:3, 3]
-        if target_rotation is None:
-            return dp
-        return np.concatenate((dp, matrix_to_rotvec(target_rotation @ ee[:3, :3].T)))
+            q, frames = np.array(q_start, dtype=float), np.array(start_frames, dtype=float)
+        rotation = self._eye[3] if position_only else np.ascontiguousarray(target_rotation, dtype=float)
+        scale = -1.0 if params.damping_scale is None else float(params.damping_scale)
+        result = np.empty(4)
+        ik_kernel(self.world_dh0, self._d, self._a, self._ca, self._sa, self._offset, self._sign, self.lower,
+                  self.upper, float(self.flange_tool[2, 3]), float(params.damping) ** 2, scale,
+                  params.delta_int / params.delta_dif, float(params.tolerance), int(params.max_iterations),
+                  target_position, rotation, 3 if position_only else 6, q, frames, result)
+        return IKResult(q=q, converged=bool(result[0] > 0.5), iterations=int(result[1]),
+                        position_error=float(result[2]), orientation_error=float(result[3]), frames=frames)
