@@ -1,24 +1,30 @@
-"""Training smoke run: train, checkpoint, get killed, resume, save a policy rollout can load."""
+"""Training: the smoke run (train, checkpoint, get killed, resume, save a policy rollout can
+load), the recipes and their round trip through a bundle, the callback on sparse infos, a
+resumed run of the default recipe and bench-train's record."""
 
 from __future__ import annotations
 
 import csv
+import importlib.util
 import json
 import os
 import signal
 import subprocess
 import sys
 import time
+import types
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from rayreach.learning.curriculum import AugmentedGoalSize, ObstacleCurriculum
+from rayreach.learning.curriculum import AugmentedGoalSize, GoalSizeParams, ObstacleCurriculum
 from rayreach.learning.bundles import CheckpointError, read_bundle_meta
 from rayreach.learning.policy import load_policy
 from rayreach.learning.export import train_command
-from rayreach.learning.train import TrainState, append_curve
+from rayreach.learning.train import (ADAPTIVE_LR_BOUNDS, RECIPES, TrainConfig, TrainState, adapted_learning_rate,
+                                     append_curve, bundle_meta, config_from_meta, recipe, with_envs)
 
 RAYREACH = [sys.executable, "-m", "rayreach.cli"]
 
@@ -28,8 +34,8 @@ def _run(*args: str, timeout: float = 240) -> subprocess.CompletedProcess:
 
 
 def _train_args(out: Path, steps: int) -> list[str]:
-    return ["train", "--robot", "ur5", "--timesteps", str(steps), "--envs", "2", "--workers", "1",
-            "--out", str(out), "--checkpoint-every", "1024"]
+    return ["train", "--robot", "ur5", "--timesteps", str(steps), "--recipe", "baseline", "--envs", "2",
+            "--workers", "1", "--out", str(out), "--checkpoint-every", "1024"]
 
 
 def test_train_kill_resume_rollout(tmp_path):
@@ -143,7 +149,178 @@ def test_exported_command_keeps_the_flags_a_resume_keeps():
     base = {"robot": "kr16", "timesteps": 17100000, "envs": 32, "checkpoint_every": 250000,
             "obstacles": {"start": 1, "minimum": 0, "maximum": 3}}
     plain = train_command(base, "models/train-kr16")
-    assert plain == ("rayreach train --robot kr16 --timesteps 17100000 --envs 32 --out models/train-kr16 "
-                     "--checkpoint-every 250000 [--resume]")
+    assert plain == ("rayreach train --recipe baseline --robot kr16 --timesteps 17100000 --envs 32 "
+                     "--out models/train-kr16 --checkpoint-every 250000 [--resume]")  # an old run: the baseline's
+    assert "--recipe" not in train_command({**base, "vec_env": "batched", "envs": 256}, "RUN")
     fixed = {**base, "acting_layers": True, "obstacles": {"start": 1, "minimum": 1, "maximum": 1}}
     assert train_command(fixed, "RUN").endswith("--checkpoint-every 250000 --acting-layers --obstacles 1 [--resume]")
+
+
+# ---------------------------------------------------------------------- recipes and the batched path
+def test_recipes_round_trip_through_bundle_meta_and_old_metas_read_as_baseline():
+    state = TrainState(AugmentedGoalSize(), ObstacleCurriculum())
+    state.learning_rate = 0.0015
+    for name in RECIPES:
+        config = recipe(name, robot="kr16", timesteps=1234)
+        meta = json.loads(json.dumps(bundle_meta(config, state, 0, "checkpoint")))  # as a bundle stores it
+        assert config_from_meta(meta) == config
+        assert TrainState.from_dict(meta["state"]).learning_rate == 0.0015
+    old = bundle_meta(RECIPES["baseline"], state, 0, "checkpoint")
+    for new_field in ("vec_env", "lr_schedule", "desired_kl"):  # a run saved before these existed
+        del old["config"][new_field]
+    assert config_from_meta(old) == RECIPES["baseline"]
+    assert TrainConfig().batched and not RECIPES["baseline"].batched
+    from rayreach.cli import TRAIN_RECIPES  # the CLI names them without importing torch
+
+    assert TRAIN_RECIPES == tuple(RECIPES)
+    assert not replace(TrainConfig(), acting_layers=True, envs=32).batched  # the layers wrap each ReachEnv
+    with pytest.raises(ValueError, match="--recipe baseline"):
+        replace(TrainConfig(), acting_layers=True)  # 256 ReachEnvs would take some 14 GB
+    with pytest.raises(ValueError, match="default, baseline"):
+        recipe("fast")
+    with pytest.raises(ValueError, match="batched, workers"):
+        TrainConfig(vec_env="subproc")
+    with pytest.raises(ValueError, match="constant, adaptive"):
+        TrainConfig(lr_schedule="linear")
+
+
+def test_with_envs_keeps_the_minibatch_where_a_rollout_holds_it():
+    assert with_envs(RECIPES["baseline"], 2).batch_size == 256  # 2 x 256 steps: as before the recipes
+    assert with_envs(TrainConfig(), 512).batch_size == 4096
+    assert with_envs(TrainConfig(), 16).batch_size == 16 * 64  # one minibatch of the whole rollout
+    with pytest.raises(ValueError, match="envs must be >= 1"):
+        with_envs(TrainConfig(), 0)
+
+
+def test_adaptive_learning_rate_follows_the_kl_within_its_bounds():
+    assert adapted_learning_rate(1e-3, 0.05, 0.01) == pytest.approx(1e-3 / 1.5)
+    assert adapted_learning_rate(1e-3, 0.001, 0.01) == pytest.approx(1.5e-3)
+    assert adapted_learning_rate(1e-3, 0.01, 0.01) == 1e-3
+    assert adapted_learning_rate(ADAPTIVE_LR_BOUNDS[1], 0.0, 0.01) == ADAPTIVE_LR_BOUNDS[1]
+    assert adapted_learning_rate(ADAPTIVE_LR_BOUNDS[0], 1.0, 0.01) == ADAPTIVE_LR_BOUNDS[0]
+
+
+class _Untouchable(dict):
+    """The info of a world whose episode goes on: the callback must not even look at it."""
+
+    def __getitem__(self, key):
+        raise AssertionError("the callback read the info of a world whose episode goes on")
+
+    get = keys = items = __contains__ = __iter__ = copy = __getitem__
+
+
+def test_callback_reads_only_the_worlds_whose_episode_ended(tmp_path):
+    from tqdm import tqdm
+
+    from rayreach.learning.train import REWARD_TERMS, _make_callback
+
+    calls = []
+    venv = types.SimpleNamespace(num_envs=4, env_method=lambda name, *args: calls.append((name, *args)))
+    model = types.SimpleNamespace(get_env=lambda: venv, logger=None, num_timesteps=4)
+    config = TrainConfig(goal=GoalSizeParams(e_zeta=0, k=1, p_zeta=0.5))  # every success shrinks the goal
+    state = TrainState(AugmentedGoalSize(config.goal), ObstacleCurriculum(config.obstacles))
+    callback = _make_callback(config, state, tmp_path, total=100)
+    callback.init_callback(model)
+    callback.bar, callback.next_checkpoint = tqdm(disable=True), 10**9
+    terms = dict.fromkeys(REWARD_TERMS, 0.0)
+    ended = {"is_success": True, "collision": False, "out_of_bounds": False, "distance": 0.005,
+             "goal_tolerance": 0.1, "true_goal_episode": False, "episode_reward_terms": {**terms, "success": 10.0}}
+    crashed = {**ended, "is_success": False, "collision": True, "goal_tolerance": 0.01, "true_goal_episode": True,
+               "episode_reward_terms": {**terms, "collision": -10.0}}
+    callback.update_locals({"dones": np.array([False, True, False, True]),
+                            "infos": [_Untouchable(), ended, _Untouchable(), crashed]})
+    assert callback.on_step()
+    assert state.episodes == 2 and list(state.recent) == ["success", "collision"]
+    assert list(state.recent_true) == ["collision"]  # played at rho_min
+    assert state.goal.episode == 1  # the true-size episode does not feed the goal curriculum
+    assert [t["success"] for t in callback.finished_terms] == [10.0, 0.0]
+    assert calls == [("set_goal_tolerance", pytest.approx(0.09))]  # one push for the whole step
+    callback.update_locals({"dones": np.zeros(4, dtype=bool), "infos": [_Untouchable()] * 4})
+    assert callback.on_step() and state.episodes == 2
+
+
+_CONTRACT_KEYS = ("is_success", "collision", "out_of_bounds", "distance", "goal_tolerance", "true_goal_episode",
+                  "episode_reward_terms", "terminal_observation", "TimeLimit.truncated")
+
+
+def _stand_in_batched_module() -> types.ModuleType:
+    """STAND-IN for ``rayreach.env.batched``: ``ReachEnv``s in a DummyVecEnv behind
+    ``BatchedReachEnv``'s contract (its signature; infos ``{}`` but at episode ends, and
+    there only the contract's keys), so that the batched path of training is tested
+    whatever state the real module is in."""
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    from rayreach.env.reach import ReachEnv
+
+    class BatchedReachEnv(DummyVecEnv):
+        def __init__(self, robot, n_worlds, scenario="random", config=None, seed=None):
+            super().__init__([lambda: ReachEnv(robot=robot, scenario=scenario, config=config)] * n_worlds)
+            self.seed(seed)
+
+        def step_wait(self):
+            obs, rewards, dones, infos = super().step_wait()
+            return obs, rewards, dones, [{k: info[k] for k in _CONTRACT_KEYS} if done else {}
+                                         for info, done in zip(infos, dones)]
+
+    module = types.ModuleType("rayreach.env.batched")
+    module.BatchedReachEnv = BatchedReachEnv
+    return module
+
+
+def _small_default(**changes) -> TrainConfig:
+    """The default recipe on 4 worlds, episodes of at most 32 steps (so that some end)."""
+    return replace(with_envs(TrainConfig(), 4), workers=1, max_episode_steps=32, checkpoint_every=10**9, **changes)
+
+
+_HAS_BATCHED = importlib.util.find_spec("rayreach.env.batched") is not None
+
+
+@pytest.mark.parametrize("env", ["stand-in", pytest.param("real", marks=pytest.mark.skipif(
+    not _HAS_BATCHED, reason="no rayreach.env.batched yet"))])
+def test_default_recipe_trains_and_resumes_on_the_batched_path(tmp_path, monkeypatch, env):
+    from rayreach.learning.train import train
+
+    if env == "stand-in":
+        monkeypatch.setitem(sys.modules, "rayreach.env.batched", _stand_in_batched_module())  # STAND-IN env
+    out = tmp_path / "run"
+    train(_small_default(timesteps=512, desired_kl=1.0), out)  # any KL of these updates is under half of 1.0
+    meta, norm = read_bundle_meta(out / "checkpoint.zip")
+    assert meta["timesteps"] == 512 and norm is not None
+    assert (meta["config"]["vec_env"], meta["config"]["lr_schedule"]) == ("batched", "adaptive")
+    adapted = meta["state"]["learning_rate"]
+    assert adapted == pytest.approx(1.5e-3)  # the second rollout's end raised it once
+    train(_small_default(timesteps=1024), out, resume=True)
+    final, _ = read_bundle_meta(out / "model.zip")
+    assert final["timesteps"] == 1024 and config_from_meta(final) == _small_default(timesteps=1024, desired_kl=1.0)
+    assert final["state"]["episodes"] > meta["state"]["episodes"] > 0
+    with (out / "curve.csv").open() as handle:
+        rows = list(csv.DictReader(handle))
+    assert [int(r["timesteps"]) for r in rows] == [256, 512, 768, 1024]
+    assert float(rows[2]["learning_rate"]) == pytest.approx(adapted)  # the resumed part went on from it
+    assert float(rows[-1]["reward_distance"]) < 0  # summed over whole episodes: episode_reward_terms
+
+
+def test_bench_train_times_both_recipes(tmp_path, monkeypatch):
+    from rayreach.evaluate.bench_train import bench_train
+
+    monkeypatch.setitem(sys.modules, "rayreach.env.batched", _stand_in_batched_module())  # STAND-IN env
+    baseline = with_envs(replace(RECIPES["baseline"], n_steps=64, workers=1), 2)
+    record = bench_train("ur5", 0.5, configs={"baseline": baseline, "default": _small_default()})
+    assert set(record) >= {"robot", "seconds", "samples_per_s", "speedup", "phases"}
+    assert set(record["samples_per_s"]) == {"baseline", "default"}
+    for name, phases in record["phases"].items():
+        assert phases["iterations"] >= 1 and phases["timed_s"] >= 0.5
+        assert phases["samples"] == phases["iterations"] * (128 if name == "baseline" else 256)
+        assert 0 < phases["collect_s"] + phases["update_s"] <= phases["timed_s"] + 0.05
+    assert record["speedup"] == pytest.approx(record["samples_per_s"]["default"] / record["samples_per_s"]["baseline"],
+                                              rel=1e-2)
+
+
+@pytest.mark.expensive
+@pytest.mark.skipif(not _HAS_BATCHED, reason="no rayreach.env.batched yet")
+def test_bench_train_command_prints_its_record_last():
+    done = _run("bench-train", "--robot", "ur5", "--seconds", "3", "--json", timeout=600)
+    assert done.returncode == 0, done.stderr[-2000:]
+    record = json.loads(done.stdout.strip().splitlines()[-1])
+    assert set(record) >= {"robot", "seconds", "samples_per_s", "speedup", "phases"}
+    assert set(record["samples_per_s"]) == {"baseline", "default"} and record["seconds"] == 3

@@ -9,6 +9,8 @@ from typing import Sequence
 
 
 EVAL_PLANNERS = "drl,rrt,ncrrt,ompl-rrt,ompl-rrtconnect"
+TRAIN_RECIPES = ("default", "baseline")
+"""``rayreach.learning.train.RECIPES``' names (that module imports torch's stack)."""
 
 LAYER_HELP = {"final_approach": "straight final approach near the goal", "ray_shield": "ray shield and its hit memory",
               "slide": "shield's slide towards the goal", "workspace_guard": "workspace guard",
@@ -58,6 +60,8 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument("--rounds", type=int, default=3, help="interleaved blocks per backend")
     bench.add_argument("--json", action="store_true", help="print one JSON line")
     bench.add_argument("--breakdown", action="store_true", help="also time each part of a step (us per call)")
+    bench.add_argument("--batched", type=int, default=None, metavar="N",
+                       help="compare the single env with the batched env of N worlds instead of the ray backends")
 
     bact = sub.add_parser("bench-acting", help="microseconds per step of the acting stack, minus each layer, and alone")
     bact.add_argument("--model", required=True, help="a model or checkpoint .zip")
@@ -104,8 +108,16 @@ def build_parser() -> argparse.ArgumentParser:
     train = sub.add_parser("train", help="train a PPO policy on random worlds (resumable)")
     train.add_argument("--robot", required=True, help="ur5 or kr16")
     train.add_argument("--timesteps", type=int, default=2_000_000, help="total environment steps")
-    train.add_argument("--envs", type=int, default=32, help="environments stepped in parallel")
-    train.add_argument("--workers", type=int, default=None, help="worker processes (default: CPU cores)")
+    train.add_argument("--recipe", choices=TRAIN_RECIPES, default="default",
+                       help="default: 256 batched worlds, 4 minibatches x 5 epochs, adaptive lr 1e-3; baseline: "
+                            "the shipped runs' 32 environments in worker processes, 256 x 10 epochs, lr 3e-4 "
+                            "(a resumed run keeps its own)")
+    train.add_argument("--envs", type=int, default=None,
+                       help="worlds stepped in parallel (default: the recipe's, 256 or 32; the minibatch stays the "
+                            "recipe's unless a rollout is smaller)")
+    train.add_argument("--workers", type=int, default=None,
+                       help="cores to use: worker processes of per-environment stepping and the update's threads "
+                            "(default: CPU cores)")
     train.add_argument("--out", required=True, help="run directory, e.g. runs/ur5")
     train.add_argument("--resume", action="store_true", help="continue the checkpoint in --out")
     train.add_argument("--seed", type=int, default=0)
@@ -126,13 +138,26 @@ def build_parser() -> argparse.ArgumentParser:
     train.add_argument("--critic-warmup", type=int, default=0,
                        help="steps at the start of this part in which only the critic learns (after clone)")
     train.add_argument("--learning-rate", type=float, default=None,
-                       help="Adam step size (default 3e-4, the paper's; also changes a resumed run)")
+                       help="Adam step size (default: the recipe's, 1e-3 adapted to the updates' KL, or baseline's "
+                            "3e-4, the paper's; also changes a resumed run and restarts its adaptation)")
     train.add_argument("--freeze-features", action="store_true",
                        help="hold the shared feature extractor fixed for this part (fine-tuning after clone)")
     train.add_argument("--goal-size", type=float, default=None, help="fix the goal size, m (no goal curriculum)")
     train.add_argument("--true-goal-share", type=float, default=None,
                        help="share of episodes at the true goal size while the goal is enlarged (default 0.5; "
                             "also changes a resumed run)")
+
+    btrain = sub.add_parser("bench-train", help="training samples per second: the baseline recipe, then the default")
+    btrain.add_argument("--robot", default="ur5", help="ur5 or kr16")
+    btrain.add_argument("--seconds", type=float, default=120.0, help="timed seconds per recipe, after a warm-up")
+    btrain.add_argument("--json", action="store_true", help="print one JSON line")
+
+    cmp_ = sub.add_parser("compare-recipes", help="the training recipes on one fixed task at equal wall time, "
+                                                  "with curves and a validation check")
+    cmp_.add_argument("--robot", default="ur5", help="ur5 or kr16")
+    cmp_.add_argument("--minutes", type=float, default=15.0, help="wall time per recipe")
+    cmp_.add_argument("--episodes", type=int, default=200, help="validation worlds each final policy runs")
+    cmp_.add_argument("--out", required=True, help="directory of the runs, curves.png and summary.json (resumable)")
 
     roll = sub.add_parser("rollout", help="run a saved policy and report success, collisions, path length")
     roll.add_argument("--model", required=True, help="a model or checkpoint .zip")
@@ -222,6 +247,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _demo(args)
         if args.command == "train":
             return _train(args, argv)
+        if args.command == "bench-train":
+            return _bench_train(args)
+        if args.command == "compare-recipes":
+            return _compare_recipes(args)
         if args.command == "export":
             from rayreach.learning.export import export_bundle
 
@@ -283,8 +312,22 @@ def _show(args: argparse.Namespace, scenario: str) -> int:
 
 
 def _bench(args: argparse.Namespace) -> int:
-    from rayreach.evaluate.bench import bench_env, step_breakdown
+    from rayreach.evaluate.bench import bench_batched, bench_env, step_breakdown
 
+    if args.batched is not None:
+        if args.batched < 1:
+            raise ValueError(f"--batched takes the number of worlds (>= 1), got {args.batched}")
+        batched = bench_batched(args.robot, args.scenario, args.batched, steps=args.steps, rounds=args.rounds)
+        if args.json:
+            print(json.dumps(batched))
+            return 0
+        for name, sps in batched["steps_per_s"].items():
+            print(f"{name:>8}: {sps:9.0f} world steps/s")
+        print(f"speedup of {args.batched} batched worlds over one env: {batched['speedup']:.1f}x "
+              f"({batched['steps']} world steps each)")
+        for stage, us in batched["us_per_world_step"].items():
+            print(f"{stage:>18}: {us:6.2f} us per world step")
+        return 0
     result = bench_env(args.robot, args.scenario, steps=args.steps, rounds=args.rounds)
     record: dict = {
         "robot": args.robot,
@@ -394,11 +437,13 @@ def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
 
     from rayreach.learning.curriculum import GoalSizeParams, ObstacleParams
     from rayreach.robots import get_robot
-    from rayreach.learning.train import TrainConfig, train
+    from rayreach.learning.train import recipe, train, with_envs
 
     robot = get_robot(args.robot).name
-    config = TrainConfig(robot=robot, timesteps=args.timesteps, envs=args.envs, seed=args.seed,
-                         checkpoint_every=args.checkpoint_every)
+    config = recipe(args.recipe, robot=robot, timesteps=args.timesteps, seed=args.seed,
+                    checkpoint_every=args.checkpoint_every)
+    if args.envs is not None:
+        config = with_envs(config, args.envs)
     if args.workers is not None:
         config = replace(config, workers=args.workers)
     if args.target_kl is not None:
@@ -429,6 +474,37 @@ def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
     path = train(config, args.out, resume=args.resume, command=command, resume_overrides=overrides,
                  critic_warmup=args.critic_warmup, freeze_features=args.freeze_features)
     print(f"model: {path}")
+    return 0
+
+
+def _bench_train(args: argparse.Namespace) -> int:
+    from rayreach.evaluate.bench_train import bench_train
+    from rayreach.robots import get_robot
+
+    if not args.seconds > 0:
+        raise ValueError(f"--seconds must be > 0, got {args.seconds}")
+    record = bench_train(get_robot(args.robot).name, args.seconds)
+    if args.json:
+        print(json.dumps(record))
+        return 0
+    print(f"{record['robot']}: {record['seconds']:g} s per recipe after a warm-up; speedup {record['speedup']:.2f}")
+    print(f"{'recipe':>10} {'samples/s':>10} {'collect s':>10} {'update s':>9}")
+    for name, rate in record["samples_per_s"].items():
+        phases = record["phases"][name]
+        print(f"{name:>10} {rate:10.0f} {phases['collect_s']:10.1f} {phases['update_s']:9.1f}")
+    return 0
+
+
+def _compare_recipes(args: argparse.Namespace) -> int:
+    from rayreach.evaluate.compare_recipes import compare_recipes
+    from rayreach.robots import get_robot
+
+    summary = compare_recipes(get_robot(args.robot).name, args.minutes, args.out, episodes=args.episodes)
+    for name, data in summary["recipes"].items():
+        v = data["validation"]
+        print(f"{name:>9}: {data['timesteps']:>10,} steps in {data['wall_time_s']:.0f} s; validation "
+              f"success {v['success_rate']:.1%}, collisions {v['collision_rate']:.1%}")
+    print(f"wrote {args.out}/curves.png and summary.json")
     return 0
 
 

@@ -14,6 +14,8 @@ def train_command(config: dict, out: str | Path) -> str:
     given to one part only (``--freeze-features``, ``--critic-warmup``) are not saved."""
     command = (f"rayreach train --robot {config['robot']} --timesteps {config['timesteps']} --envs {config['envs']} "
                f"--out {out} --checkpoint-every {config['checkpoint_every']}")
+    if config.get("vec_env", "workers") == "workers":  # a run before the batched env, or one asked for
+        command = command.replace(" --robot", " --recipe baseline --robot", 1)
     if config.get("acting_layers"):
         command += " --acting-layers"
     obstacles = config.get("obstacles", {})

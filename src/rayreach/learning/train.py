@@ -1,7 +1,10 @@
-"""PPO training with the paper's hyperparameters and curricula, resumable from checkpoints.
+"""PPO training with the paper's curricula, resumable from checkpoints.
 
-``rayreach train --robot ur5 --timesteps N --out runs/NAME [--resume]`` drives
-:func:`train`. Random worlds only: the experiments exp1..exp7 are the test set.
+``rayreach train --robot ur5 --timesteps N --out runs/NAME [--recipe NAME] [--resume]``
+drives :func:`train`. Random worlds only: the experiments exp1..exp7 are the test set.
+Two recipes (``RECIPES``): "default", many batched worlds with a few large minibatches
+(the massively parallel recipe of Rudin et al. 2021), and "baseline", the per-environment
+recipe with the paper's update that trained the shipped policies.
 """
 
 from __future__ import annotations
@@ -15,8 +18,9 @@ import time
 from collections import deque
 from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, Sequence
 
+import gymnasium as gym
 import numpy as np
 
 from rayreach.learning.curriculum import AugmentedGoalSize, GoalSizeParams, ObstacleCurriculum, ObstacleParams
@@ -30,33 +34,68 @@ CURVE_PNG = "learning_curve.png"
 RECENT = 200
 """Episodes over which training rates are computed."""
 REWARD_TERMS = tuple(f.name for f in fields(RewardWeights) if f.name != "proximity_range")
+VEC_ENVS = ("batched", "workers")
+"""How the worlds are stepped: one ``BatchedReachEnv`` for all, or one ``ReachEnv`` each."""
+ACTING_ENVS = 64
+"""Most worlds a run with acting layers may step (one ``ReachEnv`` and ``ActingEnv`` each)."""
+LR_SCHEDULES = ("constant", "adaptive")
+ADAPTIVE_LR_BOUNDS = (1e-5, 1e-2)
+"""The adaptive schedule keeps the step size within these (rsl_rl's bounds)."""
+ADAPTIVE_LR_FACTOR = 1.5
 
 
 @dataclass(frozen=True)
 class TrainConfig:
-    """One training run. PPO values are the paper's table "Hyperparameter for training"
-    unless marked; rollout sizes and the network are SB3-style choices the paper omits."""
+    """One training run; the defaults are the "default" recipe (``RECIPES``).
+
+    PPO values are the paper's table "Hyperparameter for training" unless marked. The
+    rollout and update sizes, the learning rate and the loss weights marked "rsl_rl" follow
+    Rudin et al. 2021 ("Learning to walk in minutes using massively parallel deep RL", their
+    rsl_rl PPO: 4 minibatches x 5 epochs, lr 1e-3 adapted to a KL of 0.01, value coefficient
+    1.0, gradient norm 1.0). On two cores ``rayreach bench-train`` measured 6.3 to 6.9 times
+    the baseline's samples per second (UR5, curricula at their start). There the update's cost
+    grows with each epoch but hardly depends on the minibatch from 2,048 up, so four
+    minibatches cost no more than one."""
 
     robot: str = "ur5"
     timesteps: int = 2_000_000
-    envs: int = 32
-    """Environments stepped in parallel (split over ``workers`` processes); many per worker
-    amortise the fixed cost of each policy call and message (see docs/performance.md)."""
+    envs: int = 256
+    """Worlds stepped in parallel (baseline: 32 environments split over ``workers``)."""
+    vec_env: str = "batched"
+    """One of ``VEC_ENVS``: "batched" steps all worlds in one ``BatchedReachEnv`` in this
+    process; "workers" gives each world its own ``ReachEnv``, ``envs / workers`` of them in
+    each of ``workers`` processes (the baseline). ``acting_layers`` always steps per world."""
     workers: int = field(default_factory=lambda: os.cpu_count() or 1)
-    """Worker processes; each steps envs / workers environments per message."""
+    """Cores the run may use: worker processes of "workers" stepping, and torch threads of
+    the update either way (``update_threads``)."""
     seed: int = 0
     gamma: float = 0.99
-    batch_size: int = 256
-    learning_rate: float = 3e-4
+    batch_size: int = 4096
+    """Minibatch (paper: 256): a quarter of a rollout, rsl_rl's 4 minibatches."""
+    learning_rate: float = 1e-3
+    """Adam step size (paper: 3e-4; rsl_rl: 1e-3); where ``lr_schedule`` adapts it, the start."""
+    lr_schedule: str = "adaptive"
+    """One of ``LR_SCHEDULES``. "adaptive" (rsl_rl's, not in the paper): after each update the
+    step size is divided by 1.5 if the update's mean approximate KL exceeded twice
+    ``desired_kl``, multiplied by 1.5 if it stayed under half, within ``ADAPTIVE_LR_BOUNDS``;
+    the current value is part of the checkpoint's state."""
+    desired_kl: float = 0.01
+    """The adaptive schedule's target KL per update (rsl_rl's)."""
     clip_range: float = 0.2
     ent_coef: float = 0.0
-    vf_coef: float = 0.5
-    max_grad_norm: float = 0.5
+    """The paper's (rsl_rl: 0.01). Kept: the shipped runs learned with it, and the goal's
+    last centimetre wants the action noise to shrink."""
+    vf_coef: float = 1.0
+    """Value loss weight (paper: 0.5; rsl_rl: 1.0)."""
+    max_grad_norm: float = 1.0
+    """Gradient clip (paper: 0.5; rsl_rl: 1.0)."""
     gae_lambda: float = 0.95
     max_episode_steps: int = 1024
-    n_steps: int = 256
-    """Steps per environment per rollout (not in the paper; 32 x 256 = 8,192 per update)."""
-    n_epochs: int = 10
+    n_steps: int = 64
+    """Steps per world per rollout (not in the paper; 256 x 64 = 16,384 samples per update;
+    rsl_rl: 24 steps of 4,096 worlds)."""
+    n_epochs: int = 5
+    """Passes over a rollout (paper: 10; rsl_rl: 5)."""
     features: tuple[int, ...] = (256, 256)
     """Shared feature extractor (actor and critic share it, as the paper says)."""
     heads: tuple[int, ...] = (128,)
@@ -85,50 +124,139 @@ class TrainConfig:
     not in the paper): collisions and exits the layers would stop become waits, which the
     policy must learn to go around. The layers that replace its action outright (final
     approach, detour, slide) stay out: PPO would store an action that had no effect on what
-    followed (docs/acting.md, "Training with the layers")."""
+    followed (docs/acting.md, "Training with the layers"). The layers wrap each ``ReachEnv``,
+    so the worlds are stepped per environment whatever ``vec_env`` says; each costs about
+    56 MB and 0.5 s to build, so give it the baseline's 32."""
     checkpoint_every: int = 100_000
     goal: GoalSizeParams = field(default_factory=GoalSizeParams)
     obstacles: ObstacleParams = field(default_factory=ObstacleParams)
     device: str = "cpu"
 
+    def __post_init__(self) -> None:
+        if self.vec_env not in VEC_ENVS:
+            raise ValueError(f"vec_env must be one of {', '.join(VEC_ENVS)}; got {self.vec_env!r}")
+        if self.acting_layers and self.envs > ACTING_ENVS:
+            raise ValueError(f"with acting layers each of the {self.envs} worlds is its own ReachEnv (about 56 MB "
+                             f"and 0.5 s to build); give it {ACTING_ENVS} or fewer (--envs, or --recipe baseline: 32)")
+        if self.lr_schedule not in LR_SCHEDULES:
+            raise ValueError(f"lr_schedule must be one of {', '.join(LR_SCHEDULES)}; "
+                             f"got {self.lr_schedule!r}")
+
+    @property
+    def batched(self) -> bool:
+        """All worlds in one ``BatchedReachEnv`` (else one ``ReachEnv`` per world)."""
+        return self.vec_env == "batched" and not self.acting_layers
+
+
+RECIPES: dict[str, TrainConfig] = {
+    "default": TrainConfig(),
+    "baseline": TrainConfig(envs=32, vec_env="workers", batch_size=256, learning_rate=3e-4,
+                            lr_schedule="constant", vf_coef=0.5, max_grad_norm=0.5, n_steps=256, n_epochs=10),
+}
+"""Named starting points of a run. "baseline" is the recipe of the shipped runs: 32 worlds in
+``workers`` processes, 8,192 samples per update in minibatches of 256 x 10 epochs, the
+paper's PPO values throughout."""
+
+
+def recipe(name: str, **changes: Any) -> TrainConfig:
+    """The recipe ``name`` with ``changes`` (TrainConfig fields) applied."""
+    if name not in RECIPES:
+        raise ValueError(f"unknown recipe {name!r}; choose one of {', '.join(RECIPES)}")
+    return replace(RECIPES[name], **changes)
+
+
+def with_envs(config: TrainConfig, envs: int) -> TrainConfig:
+    """``config`` with ``envs`` worlds and the same minibatch, or one rollout's worth where
+    a rollout of so few worlds is smaller (the baseline's 256 fits any count)."""
+    if envs < 1:
+        raise ValueError(f"envs must be >= 1, got {envs}")
+    return replace(config, envs=envs, batch_size=min(config.batch_size, envs * config.n_steps))
+
 
 # ---------------------------------------------------------------------- model parts
+def env_config(config: TrainConfig):
+    """The ``EnvConfig`` of every training world: curriculum start, reward weights, step budget."""
+    from rayreach.env.reach import EnvConfig
+    from rayreach.scenarios.random_world import RandomWorldConfig
+
+    return EnvConfig(
+        goal_tolerance=config.goal.rho,
+        true_goal_share=config.true_goal_share,
+        true_goal_tolerance=config.goal.rho_min,
+        max_steps=config.max_episode_steps,
+        rewards=replace(RewardWeights(), progress=config.progress_weight, proximity=config.proximity_weight,
+                        shielded=config.shield_weight),
+        random_world=RandomWorldConfig(n_obstacles=config.obstacles.start),
+    )
+
+
+class ShieldedEpisodeTerm(gym.Wrapper):
+    """Adds the episode's sum of ``ActingEnv``'s "shielded" term to the last info's
+    ``episode_reward_terms``: the ``ReachEnv`` sums its own terms inside its step, before
+    ``ActingEnv`` adds this one, and the training callback reads terms there only."""
+
+    def __init__(self, env: gym.Env) -> None:
+        super().__init__(env)
+        self.shielded = 0.0
+
+    def reset(self, **kwargs):
+        self.shielded = 0.0
+        return self.env.reset(**kwargs)
+
+    def step(self, action):
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        self.shielded += info["reward_terms"]["shielded"]
+        if terminated or truncated:
+            info["episode_reward_terms"]["shielded"] = self.shielded
+        return obs, reward, terminated, truncated, info
+
+
 def make_env_fn(config: TrainConfig, rank: int):
     """A thunk that builds one monitored random-world environment (picklable)."""
 
     def build():
         from stable_baselines3.common.monitor import Monitor
 
-        from rayreach.env.reach import EnvConfig, ReachEnv
-        from rayreach.scenarios.random_world import RandomWorldConfig
+        from rayreach.env.reach import ReachEnv
 
-        env_config = EnvConfig(
-            goal_tolerance=config.goal.rho,
-            true_goal_share=config.true_goal_share,
-            true_goal_tolerance=config.goal.rho_min,
-            max_steps=config.max_episode_steps,
-            rewards=replace(RewardWeights(), progress=config.progress_weight, proximity=config.proximity_weight,
-                            shielded=config.shield_weight),
-            random_world=RandomWorldConfig(n_obstacles=config.obstacles.start),
-        )
-        env = ReachEnv(robot=config.robot, scenario="random", config=env_config)
+        env = ReachEnv(robot=config.robot, scenario="random", config=env_config(config))
         if config.acting_layers:
             from rayreach.acting import ActingConfig, ActingEnv
 
-            env = ActingEnv(env, ActingConfig.training())
+            env = ShieldedEpisodeTerm(ActingEnv(env, ActingConfig.training()))
         env.reset(seed=config.seed * 10_000 + rank)
         return Monitor(env, info_keywords=("is_success",))
 
     return build
 
 
-def build_vec_env(config: TrainConfig):
-    from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
+def batched_vec_env(config: TrainConfig):
+    """All worlds in one ``BatchedReachEnv``, with SB3's ``VecMonitor`` for episode returns
+    and lengths (a per-world ``Monitor`` needs a per-world env)."""
+    from stable_baselines3.common.vec_env import VecMonitor
+
+    from rayreach.env.batched import BatchedReachEnv
+
+    venv = BatchedReachEnv(config.robot, config.envs, scenario="random", config=env_config(config),
+                           seed=config.seed)
+    return VecMonitor(venv, info_keywords=("is_success",))
+
+
+def per_env_vec_env(config: TrainConfig):
+    """One ``ReachEnv`` per world: in this process with one worker, else in ``WorkerVecEnv``."""
+    from stable_baselines3.common.vec_env import DummyVecEnv
 
     from rayreach.learning.vec_env import WorkerVecEnv
 
     fns = [make_env_fn(config, i) for i in range(config.envs)]
-    venv = DummyVecEnv(fns) if config.workers <= 1 else WorkerVecEnv(fns, config.workers)
+    return DummyVecEnv(fns) if config.workers <= 1 else WorkerVecEnv(fns, config.workers)
+
+
+def build_vec_env(config: TrainConfig):
+    """The training worlds as ``config.vec_env`` steps them, normalised if asked."""
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    venv = batched_vec_env(config) if config.batched else per_env_vec_env(config)
     venv.seed(config.seed)
     if config.normalize:
         venv = VecNormalize(venv, norm_obs=True, norm_reward=True, clip_obs=10.0, gamma=config.gamma)
@@ -139,6 +267,11 @@ def build_model(config: TrainConfig, venv, tensorboard_dir: str | None):
     from stable_baselines3 import PPO
 
     from rayreach.networks import SharedMLP
+
+    rollout = config.envs * config.n_steps
+    if config.batch_size > rollout:
+        raise ValueError(f"batch_size {config.batch_size} exceeds a rollout of envs {config.envs} x n_steps "
+                         f"{config.n_steps} = {rollout} samples; give at most {rollout}")
 
     policy_kwargs = {
         "features_extractor_class": SharedMLP,
@@ -204,6 +337,8 @@ class TrainState:
     """Outcomes of the last episodes (for the rates shown and logged)."""
     recent_true: deque = field(default_factory=lambda: deque(maxlen=RECENT))
     """Outcomes of the last episodes played at the true goal size."""
+    learning_rate: float | None = None
+    """The adaptive schedule's step size now (None: not adapted yet, the config's)."""
 
     def rate(self, outcome: str, true_size: bool = False) -> float:
         recent = self.recent_true if true_size else self.recent
@@ -223,6 +358,7 @@ class TrainState:
             "episodes": self.episodes,
             "recent": list(self.recent),
             "recent_true": list(self.recent_true),
+            "learning_rate": self.learning_rate,
         }
 
     @classmethod
@@ -234,6 +370,7 @@ class TrainState:
             int(data["episodes"]),
             deque(data.get("recent", []), maxlen=RECENT),
             deque(data.get("recent_true", []), maxlen=RECENT),
+            data.get("learning_rate"),
         )
 
 
@@ -242,6 +379,22 @@ def update_threads(config: TrainConfig, available: int) -> int:
     it was given. Two runs sharing two cores, each updating with two threads, ran at 170
     steps/s each, and at 1,500 to 1,800 with one thread each (docs/performance.md)."""
     return max(1, min(available, config.workers))
+
+
+def adapted_learning_rate(lr: float, kl: float, desired_kl: float) -> float:
+    """rsl_rl's rule for the next update's step size from the last update's mean KL."""
+    if kl > 2.0 * desired_kl:
+        lr /= ADAPTIVE_LR_FACTOR
+    elif kl < desired_kl / 2.0:
+        lr *= ADAPTIVE_LR_FACTOR
+    low, high = ADAPTIVE_LR_BOUNDS
+    return min(max(lr, low), high)
+
+
+def set_learning_rate(model, lr: float) -> None:
+    """A constant step size from the next update on (SB3 would keep the saved schedule)."""
+    model.learning_rate = lr
+    model._setup_lr_schedule()
 
 
 def _make_callback(config: TrainConfig, state: TrainState, out: Path, total: int, critic_warmup: int = 0,
@@ -255,12 +408,13 @@ def _make_callback(config: TrainConfig, state: TrainState, out: Path, total: int
     threads = update_threads(config, torch.get_num_threads())
 
     class TrainingCallback(BaseCallback):
-        """Feeds episode outcomes to the curricula (one state for all envs), logs rates and
-        reward terms, shows progress, writes curve.csv and checkpoints every interval."""
+        """Feeds episode outcomes to the curricula (one state for all worlds), logs rates and
+        reward terms, adapts the step size, shows progress, writes curve.csv and checkpoints
+        every interval. A step only looks at the worlds whose episode ended: infos of the
+        others may be empty, and with 256 worlds a look at each would cost more than the rest."""
 
         def __init__(self) -> None:
             super().__init__()
-            self.term_sums: list[dict[str, float]] = []
             self.finished_terms: deque[dict[str, float]] = deque(maxlen=RECENT)
             self.next_checkpoint = 0
             self.bar: Any = None
@@ -272,7 +426,6 @@ def _make_callback(config: TrainConfig, state: TrainState, out: Path, total: int
             torch.set_num_threads(1)  # intra-op threads spin and starve the env workers
 
         def _on_training_start(self) -> None:
-            self.term_sums = [dict() for _ in range(self.training_env.num_envs)]
             self.next_checkpoint = (self.num_timesteps // config.checkpoint_every + 1) * config.checkpoint_every
             self.bar = tqdm(total=total, initial=self.num_timesteps, unit="step", dynamic_ncols=True,
                             desc=f"train {config.robot}", smoothing=0.05)
@@ -281,6 +434,8 @@ def _make_callback(config: TrainConfig, state: TrainState, out: Path, total: int
             if critic_warmup > 0:
                 self.actor_frozen_until = self.num_timesteps + critic_warmup
             set_trainable(self.model.policy, actor=critic_warmup == 0, features=not freeze_features)
+            if config.lr_schedule == "adaptive":
+                set_learning_rate(self.model, state.learning_rate or config.learning_rate)
 
         def _push(self, goal: bool, obstacles: bool) -> None:
             if goal:
@@ -289,24 +444,9 @@ def _make_callback(config: TrainConfig, state: TrainState, out: Path, total: int
                 self.training_env.env_method("set_n_obstacles", state.obstacles.count)
 
         def _on_step(self) -> bool:
-            infos = self.locals["infos"]
-            dones = self.locals["dones"]
-            size, count = state.goal.size, state.obstacles.count
-            for i, (info, done) in enumerate(zip(infos, dones)):
-                sums = self.term_sums[i]
-                for key, value in info.get("reward_terms", {}).items():
-                    sums[key] = sums.get(key, 0.0) + value
-                if done:
-                    success = bool(info.get("is_success"))
-                    at_true_size = info.get("goal_tolerance", state.goal.size) <= state.goal.params.rho_min + 1e-9
-                    if not info.get("true_goal_episode"):
-                        state.goal.record(success)
-                    state.obstacles.record(success, at_true_size=at_true_size)
-                    state.record(episode_outcome(info), at_true_size)
-                    self.finished_terms.append(dict(sums))
-                    sums.clear()
-            if state.goal.size != size or state.obstacles.count != count:
-                self._push(goal=state.goal.size != size, obstacles=state.obstacles.count != count)
+            ended = np.flatnonzero(self.locals["dones"])
+            if ended.size:
+                self._episodes_ended([self.locals["infos"][i] for i in ended])
             self.bar.update(self.training_env.num_envs)
             if self.n_calls % 20 == 0 and state.recent:
                 self.bar.set_postfix(success=f"{state.rate('success'):.2f}",
@@ -317,15 +457,31 @@ def _make_callback(config: TrainConfig, state: TrainState, out: Path, total: int
                 self.next_checkpoint += config.checkpoint_every
             return True
 
+        def _episodes_ended(self, infos: list[dict[str, Any]]) -> None:
+            """Each last info to the curricula and rates; new curriculum values to all worlds."""
+            size, count = state.goal.size, state.obstacles.count
+            for info in infos:
+                success = bool(info.get("is_success"))
+                at_true_size = info.get("goal_tolerance", state.goal.size) <= state.goal.params.rho_min + 1e-9
+                if not info.get("true_goal_episode"):
+                    state.goal.record(success)
+                state.obstacles.record(success, at_true_size=at_true_size)
+                state.record(episode_outcome(info), at_true_size)
+                self.finished_terms.append(info.get("episode_reward_terms", {}))
+            if state.goal.size != size or state.obstacles.count != count:
+                self._push(goal=state.goal.size != size, obstacles=state.obstacles.count != count)
+
         def _on_rollout_end(self) -> None:
             torch.set_num_threads(threads)  # the PPO update does gain from more cores
+            if config.lr_schedule == "adaptive" and not self.actor_frozen_until:
+                self._adapt_learning_rate()  # a held actor's KL of 0 would only drive the step size up
             if self.actor_frozen_until and self.num_timesteps >= self.actor_frozen_until:
                 set_trainable(self.model.policy, actor=True, features=not freeze_features)
                 self.actor_frozen_until = 0
             self.logger.record("train/actor_frozen", int(bool(self.actor_frozen_until)))
             row = {"timesteps": self.num_timesteps, "episodes": state.episodes,
                    "wall_time": round(self.wall_time(), 1), "goal_size": state.goal.size,
-                   "obstacles": state.obstacles.count}
+                   "obstacles": state.obstacles.count, "learning_rate": self.model.learning_rate}
             for outcome in OUTCOMES:
                 row[f"{outcome}_rate"] = round(state.rate(outcome), 4)
                 self.logger.record(f"rollout/{outcome}_rate", row[f"{outcome}_rate"])
@@ -339,6 +495,16 @@ def _make_callback(config: TrainConfig, state: TrainState, out: Path, total: int
             self.logger.record("curriculum/goal_size", state.goal.size)
             self.logger.record("curriculum/obstacles", state.obstacles.count)
             append_curve(out / CURVE, row)
+
+        def _adapt_learning_rate(self) -> None:
+            """The step size for the coming update from the last one's KL. SB3 records that KL
+            in ``train()`` and writes it out only after this rollout, so it is still there
+            (absent before a part's first update, which then keeps the step size)."""
+            kl = self.logger.name_to_value.get("train/approx_kl")
+            if kl is not None:
+                lr = adapted_learning_rate(self.model.learning_rate, float(kl), config.desired_kl)
+                state.learning_rate = lr
+                set_learning_rate(self.model, lr)
 
         def wall_time(self) -> float:
             return self.wall_at_start + time.time() - self.t_start
@@ -403,7 +569,11 @@ def bundle_meta(config: TrainConfig, state: TrainState, steps: int, kind: str) -
 
 
 def config_from_meta(meta: dict[str, Any]) -> TrainConfig:
+    """The config a bundle was trained with. A field its meta lacks came after the run was
+    made, under the baseline recipe: it takes the baseline's value (the behaviour then)."""
     data = dict(meta["config"])
+    for f in fields(TrainConfig):
+        data.setdefault(f.name, getattr(RECIPES["baseline"], f.name))
     data["goal"] = GoalSizeParams(**data["goal"])
     data["obstacles"] = ObstacleParams(**data["obstacles"])
     data["features"] = tuple(data["features"])
@@ -414,7 +584,7 @@ def config_from_meta(meta: dict[str, Any]) -> TrainConfig:
 # ---------------------------------------------------------------------- entry point
 def train(config: TrainConfig, out: str | Path, resume: bool = False, command: str = "",
           resume_overrides: dict[str, Any] | None = None, critic_warmup: int = 0,
-          freeze_features: bool = False) -> Path:
+          freeze_features: bool = False, callbacks: Sequence[Any] = ()) -> Path:
     """Train (or resume) into ``out``; returns the path of the final model bundle.
 
     A resumed run keeps its saved configuration except ``timesteps``, ``workers`` and the
@@ -422,11 +592,14 @@ def train(config: TrainConfig, out: str | Path, resume: bool = False, command: s
     ``obstacles`` to hold the count, which restarts the obstacle curriculum).
     ``critic_warmup``: steps at the start of this part in which only the critic learns;
     ``freeze_features``: the feature extractor stays fixed for this part (``set_trainable``).
-    A ``learning_rate`` in ``resume_overrides`` replaces the saved one."""
+    A ``learning_rate`` in ``resume_overrides`` replaces the saved one (and restarts an
+    adaptive schedule from it). ``callbacks``: more SB3 callbacks beside the training one
+    (bench-train's timer); one that returns False ends the part as ``timesteps`` would."""
     if critic_warmup < 0:
         raise ValueError(f"critic_warmup must be >= 0 steps, got {critic_warmup}")
     out = Path(out)
     checkpoint = out / CHECKPOINT
+    import torch
     from stable_baselines3 import PPO
 
     if resume:
@@ -440,6 +613,8 @@ def train(config: TrainConfig, out: str | Path, resume: bool = False, command: s
             raise CheckpointError(f"{checkpoint} trains robot '{saved.robot}', not '{config.robot}'")
         config = replace(saved, timesteps=config.timesteps, workers=config.workers, **(resume_overrides or {}))
         state = TrainState.from_dict(meta["state"])
+        if "learning_rate" in (resume_overrides or {}):
+            state.learning_rate = None
         if "obstacles" in (resume_overrides or {}):  # a new obstacle rule starts its own count
             state.obstacles = ObstacleCurriculum(config.obstacles)
     else:
@@ -454,8 +629,7 @@ def train(config: TrainConfig, out: str | Path, resume: bool = False, command: s
         tensorboard_dir = str(out / "tensorboard") if _has_tensorboard() else None
         if resume:
             model = PPO.load(str(checkpoint), env=venv, device=config.device, tensorboard_log=tensorboard_dir)
-            model.learning_rate = config.learning_rate
-            model._setup_lr_schedule()  # SB3 keeps the saved schedule otherwise
+            set_learning_rate(model, config.learning_rate)
             if norm is not None:
                 restore_normalization(venv, norm)
         else:
@@ -466,13 +640,15 @@ def train(config: TrainConfig, out: str | Path, resume: bool = False, command: s
         if remaining > 0:
             previous = signal.getsignal(signal.SIGTERM)
             signal.signal(signal.SIGTERM, _raise_interrupt)
+            threads = torch.get_num_threads()
             try:
-                model.learn(remaining, callback=callback, reset_num_timesteps=False, tb_log_name="ppo",
-                            progress_bar=False)
+                model.learn(remaining, callback=[callback, *callbacks], reset_num_timesteps=False,
+                            tb_log_name="ppo", progress_bar=False)
             except KeyboardInterrupt:
                 interrupted = True
             finally:
                 signal.signal(signal.SIGTERM, previous)
+                torch.set_num_threads(threads)  # the callback set them per phase; a next run counts on them
             callback.save_checkpoint()  # the callback is bound to the model only once learn() ran
         if interrupted:
             raise KeyboardInterrupt(f"interrupted at {model.num_timesteps} steps; resume with --resume")
