@@ -147,3 +147,31 @@ def test_gymnasium_make_vec_gives_the_batched_worlds():
         assert infos["_final_obs"].all() and infos["final_obs"][0].shape == (142,)
     finally:
         envs.close()
+
+
+def test_bench_env_batched_prints_both_rates_their_ratio_stages_and_resets(capsys):
+    import json
+
+    from rayreach.cli import main
+    from rayreach.env.batched import STAGES
+
+    assert main(["bench-env", "--robot", "ur5", "--scenario", "random", "--batched", "4", "--steps", "24",
+                 "--rounds", "1", "--json"]) == 0
+    record = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    rates = record["steps_per_s"]
+    assert set(rates) == {"single", "batched"} and record["steps"] == 24
+    assert record["speedup"] == pytest.approx(rates["batched"] / rates["single"], rel=0.01)
+    assert set(record["us_per_world_step"]) == set(STAGES) and set(record["ms_per_reset"]) == {"single", "batched"}
+    assert main(["bench-env", "--batched", "0"]) == 2
+    assert "number of worlds" in capsys.readouterr().err
+
+
+def test_per_world_attributes_and_refused_options():
+    env = BatchedReachEnv("ur5", 3, seed=0)
+    try:
+        env.env_method("set_n_obstacles", 2, indices=[1])
+        assert env.get_attr("n_obstacles") == [3, 2, 3] and env.get_attr("random", indices=[0]) == [True]
+    finally:
+        env.close()
+    with pytest.raises(ValueError, match="PyBullet's rays"):
+        BatchedReachEnv("ur5", 1, ray_backend="bullet")

@@ -327,6 +327,8 @@ def _bench(args: argparse.Namespace) -> int:
               f"({batched['steps']} world steps each)")
         for stage, us in batched["us_per_world_step"].items():
             print(f"{stage:>18}: {us:6.2f} us per world step")
+        for name, ms in batched["ms_per_reset"].items():
+            print(f"{name:>8}: {ms:6.2f} ms per random-world reset")
         return 0
     result = bench_env(args.robot, args.scenario, steps=args.steps, rounds=args.rounds)
     record: dict = {

@@ -31,7 +31,7 @@ term summed over the episode).
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 import time
 
@@ -41,8 +41,9 @@ import numpy as np
 from gymnasium.utils import seeding
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices
 
-from rayreach.env.reach import (N_ROBOT_OBS, OBS_SIZE, REWARD_TERM_NAMES, EnvConfig, make_config, observation_space,
-                                resolve_task)
+from rayreach.env.reach import (N_ROBOT_OBS, OBS_SIZE, REWARD_TERM_NAMES, EnvConfig, make_config,
+                                observation_space, resolve_task)
+from rayreach.env.rewards import ShakeCounter
 from rayreach.scenarios import RANDOM, Scenario
 from rayreach.scenarios.feasibility import solve_start, validate
 from rayreach.scenarios.random_world import RandomWorlds
@@ -54,11 +55,14 @@ from rayreach.sim.kinematics import Kinematics
 from rayreach.sim.scene import Scene
 from rayreach.sim.sensors import N_RAYS, RayModel
 
-SHAKE_WINDOW = 10
-"""Movements the shaking counter compares (``rewards.ShakeCounter``'s window)."""
+SHAKE_WINDOW = ShakeCounter().window
+"""Movements the shaking counter compares."""
 
 STAGES = ("ik", "obstacles", "collision_spheres", "collision_bullet", "rays", "reward_and_obs", "resets")
 """The parts of a step ``stage_seconds`` times (docs/performance.md)."""
+
+BATCH_RAY_BACKENDS = ("auto", "numpy")
+"""``EnvConfig.ray_backend`` values whose rays the batched caster reproduces."""
 
 ENV_METHODS = ("set_goal_tolerance", "set_n_obstacles")
 """What ``env_method`` reaches: the curricula's setters, per world."""
@@ -79,6 +83,9 @@ class BatchedReachEnv(VecEnv):
         if n_worlds < 1:
             raise ValueError(f"n_worlds must be >= 1, got {n_worlds}")
         self.config = cfg = make_config(config, overrides)
+        if cfg.ray_backend not in BATCH_RAY_BACKENDS:
+            raise ValueError(f"the batched env casts its rays itself (ray_backend {' or '.join(BATCH_RAY_BACKENDS)}), "
+                             f"not '{cfg.ray_backend}'; use ReachEnv for PyBullet's rays")
         spec, fixed = resolve_task(robot, scenario)
         self.spec_robot = spec
         self.random = fixed is None
@@ -124,14 +131,14 @@ class BatchedReachEnv(VecEnv):
         self.converged = np.ones(n, dtype=bool)
         self.obs = np.zeros((n, OBS_SIZE), dtype=np.float32)
         self._all = np.arange(n)
-        self._active = np.ones(n, dtype=bool)
         self._actions = np.zeros((n, 6))
         self._fixed_start: np.ndarray | None = None
         self.stage_seconds = dict.fromkeys(STAGES, 0.0)
         """Seconds spent in each stage of ``step_wait`` so far (a few perf_counter calls a step)."""
         if fixed is not None:
             self._load_fixed(fixed)
-        super().__init__(n, observation_space(spec, ws_high - ws_low), gym.spaces.Box(-1.0, 1.0, (6,), np.float32))
+        super().__init__(n, observation_space(spec, ws_high - ws_low),
+                         gym.spaces.Box(-1.0, 1.0, (6,), np.float32))
         if seed is not None:
             self.seed(seed)
 
@@ -144,8 +151,8 @@ class BatchedReachEnv(VecEnv):
         finally:
             scene.close()
         for i in range(len(self.q)):
+            self._set_world(i, scenario)  # first: it names the shapes a batched world can hold
             self.collision.set_world(i, scenario.obstacles)
-            self._set_world(i, scenario)
 
     def _set_world(self, i: int, scenario: Scenario) -> None:
         """World ``i``'s scenario into the arrays (``CollisionWorlds`` has its obstacles)."""
@@ -178,12 +185,12 @@ class BatchedReachEnv(VecEnv):
         for i in range(self.num_envs):
             if self._seeds[i] is not None or self.rngs[i] is None:
                 self.rngs[i], _ = seeding.np_random(self._seeds[i])
-            self._reset_world(i)
+            self.reset_world(i)
         self._reset_seeds()
         self._reset_options()
         return self.obs.copy()
 
-    def _reset_world(self, i: int) -> None:
+    def reset_world(self, i: int) -> None:
         """``ReachEnv.reset`` for world ``i``, its observation written into ``self.obs[i]``."""
         cfg = self.config
         rng = self.rngs[i]
@@ -226,7 +233,7 @@ class BatchedReachEnv(VecEnv):
     def step_wait(self):
         cfg, w = self.config, self.config.rewards
         clock = _Clock(self.stage_seconds)
-        solve_steps(self.chain, cfg.ik, self._actions, self.q, self.frames, self.ee_pos, self.ee_rot, self._active,
+        solve_steps(self.chain, cfg.ik, self._actions, self.q, self.frames, self.ee_pos, self.ee_rot,
                     self.converged)
         clock.lap("ik")
         self.steps += 1
@@ -262,7 +269,7 @@ class BatchedReachEnv(VecEnv):
         terms[:, 6] = w.progress * (self.previous_distance - distance)
         terms[:, 7] = w.proximity * np.maximum(0.0, 1.0 - self.fractions.min(axis=1) / w.proximity_range)
         rewards = terms[:, 0].copy()
-        for k in range(1, terms.shape[1]):  # summed in ReachEnv's order, to the last bit
+        for k in range(1, terms.shape[1]):  # summed in ReachEnv's order
             rewards += terms[:, k]
         self.episode_terms += terms
 
@@ -297,7 +304,7 @@ class BatchedReachEnv(VecEnv):
                 "TimeLimit.truncated": bool(truncated[i]),
                 "terminal_observation": self.obs[i].copy(),
             }
-            self._reset_world(int(i))
+            self.reset_world(int(i))
         clock.lap("resets")
         return self.obs.copy(), rewards.astype(np.float32), dones, infos
 
@@ -313,15 +320,21 @@ class BatchedReachEnv(VecEnv):
         self.collision.close()
 
     def get_attr(self, attr_name: str, indices: VecEnvIndices = None) -> list[Any]:
+        """Per world: a row of the per-world arrays (``n_obstacles``, ``goal_tolerance``, ...),
+        else the env's own attribute, which all worlds share."""
         value = getattr(self, attr_name)
-        return [value for _ in self._get_indices(indices)]
+        per_world = isinstance(value, np.ndarray) and value.shape[:1] == (self.num_envs,)
+        return [value[i] if per_world else value for i in self._get_indices(indices)]
 
     def set_attr(self, attr_name: str, value: Any, indices: VecEnvIndices = None) -> None:
-        raise AttributeError(f"BatchedReachEnv's worlds share their attributes; set '{attr_name}' on the env itself")
+        raise AttributeError(f"BatchedReachEnv sets no attribute '{attr_name}' per world; its per-world "
+                             f"setters are env_method's {', '.join(ENV_METHODS)}")
 
-    def env_method(self, method_name: str, *method_args, indices: VecEnvIndices = None, **method_kwargs) -> list[Any]:
+    def env_method(self, method_name: str, *method_args, indices: VecEnvIndices = None,
+                   **method_kwargs) -> list[Any]:
         if method_name not in ENV_METHODS:
-            raise AttributeError(f"BatchedReachEnv has no per-world method '{method_name}'; it has {', '.join(ENV_METHODS)}")
+            raise AttributeError(f"BatchedReachEnv has no per-world method '{method_name}'; "
+                                 f"it has {', '.join(ENV_METHODS)}")
         getattr(self, method_name)(*method_args, indices=indices, **method_kwargs)
         return [None for _ in self._get_indices(indices)]
 

@@ -4,7 +4,9 @@
 gives a ``ReachVectorEnv``: ``BatchedReachEnv``'s worlds with Gymnasium's signatures
 (``terminated`` and ``truncated`` apart, infos as a dict of arrays). A world whose episode
 ends is reset in the same step (``AutoresetMode.SAME_STEP``): its last observation and info
-are in ``infos["final_obs"]`` and ``infos["final_info"]``.
+are in ``infos["final_obs"]`` and ``infos["final_info"]`` (masks ``"_final_obs"`` and
+``"_final_info"``). Those are all ``infos`` holds: a world whose episode goes on reports no
+info, and ``reset`` returns ``{}`` (``BatchedReachEnv``'s infos).
 """
 
 from __future__ import annotations
@@ -25,8 +27,8 @@ class ReachVectorEnv(VectorEnv):
 
     metadata = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": []}
 
-    def __init__(self, robot: str | None = None, num_envs: int = 256, scenario: str | Path | Scenario = RANDOM,
-                 **kwargs: Any) -> None:
+    def __init__(self, robot: str | None = None, num_envs: int = 256,
+                 scenario: str | Path | Scenario = RANDOM, **kwargs: Any) -> None:
         self.batched = BatchedReachEnv(robot, num_envs, scenario, **kwargs)
         self.num_envs = num_envs
         self.single_observation_space = self.batched.observation_space
@@ -51,8 +53,9 @@ class ReachVectorEnv(VectorEnv):
         merged: dict[str, Any] = {}
         for i in np.flatnonzero(dones):
             final = dict(infos[i])
-            merged = self._add_info(merged, {"final_obs": final.pop("terminal_observation"), "final_info": final},
-                                    int(i))
+            final_obs = final.pop("terminal_observation")
+            final.pop("TimeLimit.truncated")  # SB3's key; Gymnasium has ``truncated`` for it
+            merged = self._add_info(merged, {"final_obs": final_obs, "final_info": final}, int(i))
         return obs, rewards, dones & ~truncated, truncated, merged
 
     def close_extras(self, **kwargs: Any) -> None:

@@ -58,13 +58,18 @@ def bench_env(robot: str, scenario: str, steps: int = 3000, rounds: int = 3, see
     return BenchResult({b: total / elapsed[b] for b in backends}, total, rounds)
 
 
+RESETS_PER_ROUND = 20
+"""Resets each env takes per round in ``bench_batched``'s timing of resets alone."""
+
+
 def bench_batched(robot: str, scenario: str, n_worlds: int = 256, steps: int = 20000, rounds: int = 3,
                   seed: int = 0) -> dict:
     """World steps per second of one ``ReachEnv`` and of a ``BatchedReachEnv`` of ``n_worlds``
     worlds, each taking ``steps`` world steps (the batched env ``steps / n_worlds`` calls) of
     uniformly random actions, in ``rounds`` interleaved blocks; episodes reset as they end,
     resets included. Building the envs and their first reset (numba's compiled code is
-    loaded then) are not timed. Also: the batched step's seconds per stage, per world step."""
+    loaded then) are not timed. Also: the batched step's seconds per stage, per world step,
+    and what a reset costs each env (``RESETS_PER_ROUND`` resets a round, interleaved)."""
     from rayreach.env.batched import BatchedReachEnv
 
     single = ReachEnv(robot=robot, scenario=scenario)
@@ -90,6 +95,16 @@ def bench_batched(robot: str, scenario: str, n_worlds: int = 256, steps: int = 2
             for k in range(calls):
                 batched.step(actions[k * n_worlds:(k + 1) * n_worlds])
             elapsed["batched"] += time.perf_counter() - t0
+        resets = {"single": 0.0, "batched": 0.0}
+        for r in range(rounds):  # random-world resets alone: what training's short episodes pay
+            t0 = time.perf_counter()
+            for _ in range(RESETS_PER_ROUND):
+                single.reset()
+            resets["single"] += time.perf_counter() - t0
+            t0 = time.perf_counter()
+            for i in range(RESETS_PER_ROUND):
+                batched.reset_world((r * RESETS_PER_ROUND + i) % n_worlds)
+            resets["batched"] += time.perf_counter() - t0
     finally:
         single.close()
         batched.close()
@@ -98,7 +113,8 @@ def bench_batched(robot: str, scenario: str, n_worlds: int = 256, steps: int = 2
     stages = {k: round(v / total * 1e6, 2) for k, v in batched.stage_seconds.items()}
     return {"robot": robot, "scenario": scenario, "n_worlds": n_worlds, "steps": total,
             "steps_per_s": {k: round(v, 1) for k, v in rates.items()},
-            "speedup": round(rates["batched"] / rates["single"], 2), "us_per_world_step": stages}
+            "speedup": round(rates["batched"] / rates["single"], 2), "us_per_world_step": stages,
+            "ms_per_reset": {k: round(v / (rounds * RESETS_PER_ROUND) * 1e3, 2) for k, v in resets.items()}}
 
 
 

@@ -1,9 +1,10 @@
 """Training throughput: the baseline recipe and the default, the same wall time each.
 
-``rayreach bench-train --robot ur5 --seconds 120 --json`` trains each recipe of
-``rayreach.learning.train.RECIPES`` in turn, from scratch, into a temporary directory, with
-the curricula at their start (random worlds with 1 obstacle, goal 0.1 m), the training
-callback, curve.csv and TensorBoard as in a real run, and no checkpoint before the end.
+``rayreach bench-train --robot ur5 --seconds 120 --json`` trains each recipe in
+``BENCH_RECIPES`` (both of ``rayreach.learning.train.RECIPES``) in turn, from scratch, into a
+temporary directory, with the curricula at their start (random worlds with 1 obstacle, goal
+0.1 m), the training callback, curve.csv and TensorBoard as in a real run, and no checkpoint
+before the end.
 
 samples/s counts whole PPO iterations (a rollout and its update) after a warm-up: building
 the worlds, compiling the batched env and the first iteration are left out. The timed part

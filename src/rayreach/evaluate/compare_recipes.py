@@ -1,18 +1,19 @@
 """Training recipes compared on one fixed task at equal wall time.
 
-``rayreach compare-recipes --robot ur5 --minutes 15 --out runs/compare`` trains each recipe of
-``rayreach.learning.train.RECIPES`` from scratch on the same task (random worlds of one
-obstacle, a 0.1 m goal, both curricula held), for the same wall time one after the other,
-then runs each final policy alone, deterministically, on validation worlds of that task.
-It writes ``curves.png`` (success over wall time, both recipes) and ``summary.json``. A run
-that was stopped resumes where it stood: finished recipes are kept, an interrupted one
-continues from its checkpoint with the wall time it has left.
+``rayreach compare-recipes --robot ur5 --minutes 15 --out runs/compare`` trains each recipe in
+``COMPARED`` (both of ``rayreach.learning.train.RECIPES``) from scratch on the same task
+(random worlds of one obstacle, a 0.1 m goal, both curricula held), for the same wall time
+one after the other, then runs each final policy alone, deterministically, on validation
+worlds of that task. It writes ``curves.png`` (success over wall time, both recipes) and
+``summary.json``. A run that was stopped resumes where it stood: finished recipes are kept,
+an interrupted one continues from its checkpoint with the wall time it has left.
 """
 
 from __future__ import annotations
 
 import csv
 import json
+import os
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -68,7 +69,8 @@ def train_for(config: TrainConfig, seconds: float, out: Path) -> Path:
 def curve(path: Path) -> dict[str, list[float]]:
     with path.open() as handle:
         rows = list(csv.DictReader(handle))
-    return {key: [float(r[key]) for r in rows] for key in ("wall_time", "timesteps", "success_rate", "collision_rate")}
+    return {key: [float(r[key]) for r in rows]
+            for key in ("wall_time", "timesteps", "success_rate", "collision_rate")}
 
 
 def compare_recipes(robot: str, minutes: float, out: str | Path, episodes: int = 200,
@@ -82,7 +84,7 @@ def compare_recipes(robot: str, minutes: float, out: str | Path, episodes: int =
         raise ValueError(f"minutes must be positive, got {minutes}")
     out = Path(out)
     summary: dict[str, Any] = {"robot": robot, "minutes": minutes, "goal_m": GOAL, "obstacles": OBSTACLES,
-                               "episodes": episodes, "split": "validation", "recipes": {}}
+                               "episodes": episodes, "split": "validation", "cores": os.cpu_count(), "recipes": {}}
     for name in COMPARED:
         model = train_for(fixed_task(recipe(name, robot=robot)), minutes * 60.0, out / name)
         checked = rollout(str(model), "random", episodes=episodes, goal_tolerance=GOAL, n_obstacles=OBSTACLES,
@@ -110,7 +112,7 @@ def plot_curves(summary: dict[str, Any], path: Path) -> Path:
         label = f"{name}: validation {final:.0%} alone"
         by_time.plot([t / 60 for t in c["wall_time"]], c["success_rate"], color=color, label=label)
         by_samples.plot([s / 1e6 for s in c["timesteps"]], c["success_rate"], color=color, label=label)
-    by_time.set_xlabel("wall time (min, 2 cores)")
+    by_time.set_xlabel(f"wall time (min, {summary['cores']} cores)")
     by_samples.set_xlabel("environment steps (millions)")
     by_time.set_ylabel("training success, last 200 episodes")
     for ax in (by_time, by_samples):

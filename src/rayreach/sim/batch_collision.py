@@ -222,7 +222,8 @@ about 2.5 kB each; ``CollisionWorlds`` starts a fresh client after making this m
 def _shape(obstacle: ObstacleSpec, client: int) -> int:
     """The collision shape of a box or sphere, as ``Scene._create_obstacle`` makes it."""
     if obstacle.shape == "box":
-        return p.createCollisionShape(p.GEOM_BOX, halfExtents=list(obstacle.half_extents), physicsClientId=client)
+        return p.createCollisionShape(p.GEOM_BOX, halfExtents=list(obstacle.half_extents),
+                                      physicsClientId=client)
     return p.createCollisionShape(p.GEOM_SPHERE, radius=obstacle.radius, physicsClientId=client)
 
 
@@ -271,7 +272,8 @@ class CollisionWorlds:
                  base_rpy: Sequence[float] | None = None) -> None:
         self._scene_args = (spec, base_position, base_rpy)
         self._scene = Scene(spec, base_position, base_rpy)
-        self.kin = kin = Kinematics(spec, *(None if v is None else tuple(v) for v in (base_position, base_rpy)))
+        self.kin = kin = Kinematics(spec, *(None if v is None else tuple(v)
+                                            for v in (base_position, base_rpy)))
         self.spheres = ArmSpheres.of(self._scene, kin)
         self._links = [int(link) for link in self.spheres.links]
         self._bound_frame = self.spheres.bound_frame
@@ -303,7 +305,8 @@ class CollisionWorlds:
         distances = [c[8] for k, o in enumerate(w.obstacles)
                      for c in p.getClosestPoints(robot, -1, within, collisionShapeB=w.shapes[k],
                                                  collisionShapePositionB=list(o.position),
-                                                 collisionShapeOrientationB=w.orientation[k], physicsClientId=cid)]
+                                                 collisionShapeOrientationB=w.orientation[k],
+                                                 physicsClientId=cid)]
         return min(distances, default=within)
 
     def _restart(self) -> None:

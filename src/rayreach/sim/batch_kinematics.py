@@ -8,8 +8,9 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from rayreach.sim.ik_kernel import frames_kernel, ik_kernel, rotvec_matrix
+from rayreach.sim.ik_kernel import ik_kernel, rotvec_matrix
 from rayreach.sim.kinematics import IKParams, Kinematics
+
 
 @dataclass(frozen=True)
 class ChainArrays:
@@ -34,36 +35,28 @@ class ChainArrays:
 
 
 def solve_steps(chain: ChainArrays, params: IKParams, delta: np.ndarray, q: np.ndarray, frames: np.ndarray,
-                ee_pos: np.ndarray, ee_rot: np.ndarray, active: np.ndarray, converged: np.ndarray) -> None:
+                ee_pos: np.ndarray, ee_rot: np.ndarray, converged: np.ndarray) -> None:
     """Take the pose step ``delta`` (N, 6: m, then a rotation vector in rad) in every
-    ``active`` world: IK from the world's joints, then ``q``, ``frames``, ``ee_pos`` and
+    world: IK from the world's joints, then ``q``, ``frames``, ``ee_pos`` and
     ``ee_rot`` (all (N, ...)) hold the solution and ``converged`` (N,) whether it met the
     tolerance, as ``ReachEnv.solve`` followed by ``advance(taken=True)``."""
     scale = -1.0 if params.damping_scale is None else float(params.damping_scale)
     _solve_steps(chain.world_dh0, chain.d, chain.a, chain.ca, chain.sa, chain.offset, chain.sign, chain.lower,
                  chain.upper, chain.tool_length, float(params.damping) ** 2, scale,
                  params.delta_int / params.delta_dif, float(params.tolerance), int(params.max_iterations),
-                 delta, q, frames, ee_pos, ee_rot, active, converged)
-
-
-def chain_frames(chain: ChainArrays, q: np.ndarray, frames: np.ndarray) -> None:
-    """DH frames (N, 7, 4, 4) of joint angles ``q`` (N, 6), written into ``frames``."""
-    for i in range(len(q)):
-        frames_kernel(chain.world_dh0, chain.d, chain.a, chain.ca, chain.sa, chain.offset, chain.sign, q[i], frames[i])
+                 delta, q, frames, ee_pos, ee_rot, converged)
 
 
 # ---------------------------------------------------------------------- compiled parts
 @numba.njit(cache=True)
 def _solve_steps(world_dh0, d, a, ca, sa, offset, sign, lower, upper, tool_length, damping2, scale, gain,
-                 tolerance, max_iterations, delta, q, frames, ee_pos, ee_rot, active,
+                 tolerance, max_iterations, delta, q, frames, ee_pos, ee_rot,
                  converged):  # pragma: no cover - compiled
     step_rot = np.empty((3, 3))
     target_rot = np.empty((3, 3))
     target_pos = np.empty(3)
     result = np.empty(4)
     for w in range(q.shape[0]):
-        if not active[w]:
-            continue
         rotvec_matrix(delta[w, 3:], step_rot)
         for i in range(3):  # ReachEnv.solve: the step's rotation applied to the tool's orientation
             target_pos[i] = ee_pos[w, i] + delta[w, i]

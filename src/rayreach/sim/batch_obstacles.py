@@ -50,7 +50,8 @@ class ShapeRows:
         """Room for ``rows`` obstacles per world, keeping what is there."""
         if rows <= self.rows:
             return
-        old = {name: getattr(self, name) for name in ("pos", "rot", "size", "start", "direction", "speed", "travel")}
+        old = {name: getattr(self, name)
+               for name in ("pos", "rot", "size", "start", "direction", "speed", "travel")}
         self._allocate(len(self.count), rows)
         for name, array in old.items():
             getattr(self, name)[:, : array.shape[1]] = array
@@ -93,7 +94,8 @@ class ObstacleBatch:
     def at_time(self, time: np.ndarray) -> None:
         """Move every moving obstacle to where it is at each world's ``time`` (N,), s."""
         for rows in (self.boxes, self.spheres):
-            _move(rows.pos, rows.start, rows.direction, rows.speed, rows.travel, rows.count, self.moving, time)
+            _move(rows.pos, rows.start, rows.direction, rows.speed, rows.travel, rows.count, self.moving,
+                  time)
 
 
 @numba.njit(cache=True)

@@ -2,10 +2,11 @@
 hit fractions against each world's boxes and spheres.
 
 The arithmetic is ``RayModel.world_rays`` and ``NumpyCaster``'s (slab test for boxes, the
-quadratic for spheres), per ray and obstacle in a loop that numba compiles. Two exact
-rejection skips most obstacles, exactly: one whose bounding sphere misses the sphere round
+quadratic for spheres), per ray and obstacle in a loop that numba compiles. An exact
+rejection test skips most obstacles: one whose bounding sphere misses the sphere round
 all of a world's rays is not looked at. The rays of a world are laid out as coordinate
-planes and tested without branches, so that the compiler vectorises the inner loops. Neither changes a result.
+planes and tested without branches, so that the compiler vectorises the inner loops.
+Neither changes a result.
 """
 
 from __future__ import annotations
@@ -40,7 +41,8 @@ class RayArrays:
             origins.append(lo)
             directions.append(ld.T)
         return cls(np.asarray(frames, dtype=np.int64), np.asarray(offsets, dtype=float), mount,
-                   np.ascontiguousarray(np.concatenate(origins)), np.ascontiguousarray(np.concatenate(directions)))
+                   np.ascontiguousarray(np.concatenate(origins)),
+                   np.ascontiguousarray(np.concatenate(directions)))
 
 
 def cast_worlds(layout: RayArrays, frames: np.ndarray, obstacles: ObstacleBatch, ray_range: float,
@@ -48,8 +50,8 @@ def cast_worlds(layout: RayArrays, frames: np.ndarray, obstacles: ObstacleBatch,
     """Hit fractions (``fractions[i]``, 129 each, 1: nothing within ``ray_range``) of the
     rays of every world ``i`` in ``which`` (indices), with the arm at ``frames[i]``."""
     boxes, spheres = obstacles.boxes, obstacles.spheres
-    _cast(layout.mount_frame, layout.mount_offset, layout.ray_mount, layout.origins, layout.directions, frames,
-          boxes.pos, boxes.rot, boxes.size, boxes.count, spheres.pos, spheres.size, spheres.count,
+    _cast(layout.mount_frame, layout.mount_offset, layout.ray_mount, layout.origins, layout.directions,
+          frames, boxes.pos, boxes.rot, boxes.size, boxes.count, spheres.pos, spheres.size, spheres.count,
           float(ray_range), which, fractions)
 
 

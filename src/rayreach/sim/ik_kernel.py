@@ -125,8 +125,9 @@ def _solve(m, b, x):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True)
-def ik_kernel(world_dh0, d, a, ca, sa, offset, sign, lower, upper, tool_length, damping2, scale, gain, tolerance,
-              max_iterations, target_pos, target_rot, rows, q, frames, result):  # pragma: no cover - compiled
+def ik_kernel(world_dh0, d, a, ca, sa, offset, sign, lower, upper, tool_length, damping2, scale, gain,
+              tolerance, max_iterations, target_pos, target_rot, rows, q, frames,
+              result):  # pragma: no cover - compiled
     """Algorithm 1 from ``q`` (whose DH frames ``frames`` holds) towards ``target_pos`` and, for
     ``rows`` 6, ``target_rot``; ``rows`` 3 solves for the position only. ``q`` and ``frames``
     end at the solution; ``result`` gets (converged, iterations, position error, orientation

@@ -1,0 +1,49 @@
+"""The fixed task of the recipe comparison holds both curricula; its clock ends training."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from rayreach.evaluate.compare_recipes import GOAL, OBSTACLES, WallClock, fixed_task
+from rayreach.learning.curriculum import AugmentedGoalSize, ObstacleCurriculum
+from rayreach.learning.train import recipe
+
+
+@pytest.mark.parametrize("name", ["baseline", "default"])
+def test_the_fixed_task_keeps_goal_and_obstacles_whatever_the_outcomes(name):
+    config = fixed_task(recipe(name))
+    goal, obstacles = AugmentedGoalSize(config.goal), ObstacleCurriculum(config.obstacles)
+    for episode in range(3000):  # long runs of failures, then of successes
+        success = episode >= 1500
+        goal.record(success)
+        obstacles.record(success, at_true_size=True)
+        assert goal.size == GOAL and obstacles.count == OBSTACLES
+    assert config.true_goal_share == 0.0
+    assert (config.envs, config.batch_size) == (recipe(name).envs, recipe(name).batch_size)
+
+
+def test_the_wall_clock_stops_learning():
+    from stable_baselines3 import PPO
+
+    from rayreach.env.batched import BatchedReachEnv
+
+    env = BatchedReachEnv("ur5", 2, seed=0, max_steps=20)
+    try:
+        model = PPO("MlpPolicy", env, n_steps=8, batch_size=16, n_epochs=1)
+        model.learn(10**9, callback=WallClock(1.0))
+        assert 0 < model.num_timesteps < 10**9
+    finally:
+        env.close()
+
+
+@pytest.mark.expensive
+def test_compare_recipes_writes_curves_and_a_summary(tmp_path):
+    from rayreach.cli import main
+
+    assert main(["compare-recipes", "--robot", "ur5", "--minutes", "0.2", "--episodes", "2",
+                 "--out", str(tmp_path)]) == 0
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert set(summary["recipes"]) == {"baseline", "default"} and (tmp_path / "curves.png").exists()
+    assert all(r["validation"]["success_rate"] is not None for r in summary["recipes"].values())
