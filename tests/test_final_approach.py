@@ -409,7 +409,8 @@ def test_training_envs_act_with_the_layers_only_when_asked():
     shield, workspace guard and arm's rule of the shipped stack; the layers that replace the
     policy's action (final approach, detour, slide) stay out."""
     for acting in (False, True):
-        monitored = make_env_fn(TrainConfig(robot="ur5", acting_layers=acting, shield_weight=-0.1), 0)()
+        config = TrainConfig(robot="ur5", envs=32, acting_layers=acting, shield_weight=-0.1)
+        monitored = make_env_fn(config, 0)()
         try:
             wrapper = _acting_env(monitored)
             assert (wrapper is not None) == acting
