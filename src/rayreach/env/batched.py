@@ -48,7 +48,7 @@ from rayreach.scenarios import RANDOM, Scenario
 from rayreach.scenarios.feasibility import solve_start, validate
 from rayreach.scenarios.random_world import RandomWorlds
 from rayreach.sim.batch_collision import CollisionWorlds, candidates
-from rayreach.sim.batch_kinematics import ChainArrays, solve_steps
+from rayreach.sim.batch_kinematics import solve_steps
 from rayreach.sim.batch_obstacles import ObstacleBatch
 from rayreach.sim.batch_rays import RayArrays, cast_worlds
 from rayreach.sim.kinematics import Kinematics
@@ -92,7 +92,6 @@ class BatchedReachEnv(VecEnv):
         base_pos = fixed.base_position if fixed else None
         base_rpy = fixed.base_rpy if fixed else None
         self.kin = Kinematics(spec, base_pos, base_rpy)
-        self.chain = ChainArrays.of(self.kin)
         self.layout = RayArrays.of(RayModel(spec, cfg.ray_range))
         self.collision = CollisionWorlds(spec, n_worlds, base_pos, base_rpy)
         self.spheres = self.collision.spheres
@@ -233,7 +232,7 @@ class BatchedReachEnv(VecEnv):
     def step_wait(self):
         cfg, w = self.config, self.config.rewards
         clock = _Clock(self.stage_seconds)
-        solve_steps(self.chain, cfg.ik, self._actions, self.q, self.frames, self.ee_pos, self.ee_rot,
+        solve_steps(self.kin, cfg.ik, self._actions, self.q, self.frames, self.ee_pos, self.ee_rot,
                     self.converged)
         clock.lap("ik")
         self.steps += 1

@@ -14,6 +14,7 @@ from __future__ import annotations
 import csv
 import json
 import os
+import time
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -47,13 +48,9 @@ class WallClock(BaseCallback):
         self.start = 0.0
 
     def _on_training_start(self) -> None:
-        import time
-
         self.start = time.monotonic()
 
     def _on_step(self) -> bool:
-        import time
-
         return time.monotonic() - self.start < self.seconds
 
 

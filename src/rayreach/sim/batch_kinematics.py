@@ -3,8 +3,6 @@ runs it) in a loop over the worlds, which pays Python's per-call cost once for a
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numba
 import numpy as np
 
@@ -12,39 +10,13 @@ from rayreach.sim.ik_kernel import ik_kernel, rotvec_matrix
 from rayreach.sim.kinematics import IKParams, Kinematics
 
 
-@dataclass(frozen=True)
-class ChainArrays:
-    """One robot's DH chain, base pose and tool as the kernels read them."""
-
-    world_dh0: np.ndarray
-    d: np.ndarray
-    a: np.ndarray
-    ca: np.ndarray
-    sa: np.ndarray
-    offset: np.ndarray
-    sign: np.ndarray
-    lower: np.ndarray
-    upper: np.ndarray
-    tool_length: float
-
-    @classmethod
-    def of(cls, kin: Kinematics) -> "ChainArrays":
-        return cls(kin.world_dh0.copy(), kin._d.copy(), kin._a.copy(), kin._ca.copy(), kin._sa.copy(),
-                   kin._offset.copy(), kin._sign.copy(), kin.lower.copy(), kin.upper.copy(),
-                   float(kin.flange_tool[2, 3]))
-
-
-def solve_steps(chain: ChainArrays, params: IKParams, delta: np.ndarray, q: np.ndarray, frames: np.ndarray,
+def solve_steps(kin: Kinematics, params: IKParams, delta: np.ndarray, q: np.ndarray, frames: np.ndarray,
                 ee_pos: np.ndarray, ee_rot: np.ndarray, converged: np.ndarray) -> None:
     """Take the pose step ``delta`` (N, 6: m, then a rotation vector in rad) in every
     world: IK from the world's joints, then ``q``, ``frames``, ``ee_pos`` and
     ``ee_rot`` (all (N, ...)) hold the solution and ``converged`` (N,) whether it met the
     tolerance, as ``ReachEnv.solve`` followed by ``advance(taken=True)``."""
-    scale = -1.0 if params.damping_scale is None else float(params.damping_scale)
-    _solve_steps(chain.world_dh0, chain.d, chain.a, chain.ca, chain.sa, chain.offset, chain.sign, chain.lower,
-                 chain.upper, chain.tool_length, float(params.damping) ** 2, scale,
-                 params.delta_int / params.delta_dif, float(params.tolerance), int(params.max_iterations),
-                 delta, q, frames, ee_pos, ee_rot, converged)
+    _solve_steps(*kin.kernel_args(params), delta, q, frames, ee_pos, ee_rot, converged)
 
 
 # ---------------------------------------------------------------------- compiled parts

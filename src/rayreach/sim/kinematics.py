@@ -162,11 +162,17 @@ class Kinematics:
         else:
             q, frames = np.array(q_start, dtype=float), np.array(start_frames, dtype=float)
         rotation = self._eye[3] if position_only else np.ascontiguousarray(target_rotation, dtype=float)
-        scale = -1.0 if params.damping_scale is None else float(params.damping_scale)
         result = np.empty(4)
-        ik_kernel(self.world_dh0, self._d, self._a, self._ca, self._sa, self._offset, self._sign, self.lower,
-                  self.upper, float(self.flange_tool[2, 3]), float(params.damping) ** 2, scale,
-                  params.delta_int / params.delta_dif, float(params.tolerance), int(params.max_iterations),
-                  target_position, rotation, 3 if position_only else 6, q, frames, result)
+        ik_kernel(*self.kernel_args(params), target_position, rotation, 3 if position_only else 6, q, frames,
+                  result)
         return IKResult(q=q, converged=bool(result[0] > 0.5), iterations=int(result[1]),
                         position_error=float(result[2]), orientation_error=float(result[3]), frames=frames)
+
+    def kernel_args(self, params: IKParams) -> tuple:
+        """The chain and ``params`` as ``ik_kernel`` takes them, up to its target: base pose,
+        DH values, joint limits, tool length, lambda^2, damping scale (-1: none), gain,
+        tolerance and iteration limit."""
+        scale = -1.0 if params.damping_scale is None else float(params.damping_scale)
+        return (self.world_dh0, self._d, self._a, self._ca, self._sa, self._offset, self._sign, self.lower,
+                self.upper, float(self.flange_tool[2, 3]), float(params.damping) ** 2, scale,
+                params.delta_int / params.delta_dif, float(params.tolerance), int(params.max_iterations))
