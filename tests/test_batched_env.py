@@ -175,3 +175,11 @@ def test_per_world_attributes_and_refused_options():
         env.close()
     with pytest.raises(ValueError, match="PyBullet's rays"):
         BatchedReachEnv("ur5", 1, ray_backend="bullet")
+
+
+def test_the_planner_observation_steps_as_reach_env_does():
+    from rayreach.env.observation import ObservationConfig
+
+    outcomes = _compare("ur5", "random", 8, 30, max_steps=100, goal_tolerance=0.1,
+                        observation=ObservationConfig.planner())
+    assert sum(outcomes.values()) >= 30

@@ -184,6 +184,19 @@ def test_recipes_round_trip_through_bundle_meta_and_old_metas_read_as_baseline()
         TrainConfig(lr_schedule="linear")
 
 
+def test_paper_recipe_is_the_papers_agent():
+    from rayreach.learning.curriculum import GoalSizeParams
+
+    paper = RECIPES["paper"]
+    assert paper.observation.is_paper and not paper.normalize and paper.share_features
+    assert (paper.progress_weight, paper.proximity_weight, paper.true_goal_share, paper.target_kl) == (0, 0, 0, None)
+    assert (paper.gamma, paper.batch_size, paper.learning_rate, paper.lr_schedule, paper.clip_range,
+            paper.max_episode_steps, paper.ent_coef, paper.vf_coef, paper.max_grad_norm, paper.gae_lambda) == (
+        0.99, 256, 3e-4, "constant", 0.2, 1024, 0.0, 0.5, 0.5, 0.95)  # table "Hyperparameter for training"
+    assert paper.goal == GoalSizeParams() and not paper.acting_layers
+    assert not TrainConfig().observation.is_paper and RECIPES["baseline"].observation.is_paper
+
+
 def test_with_envs_keeps_the_minibatch_where_a_rollout_holds_it():
     assert with_envs(RECIPES["baseline"], 2).batch_size == 256  # 2 x 256 steps: as before the recipes
     assert with_envs(TrainConfig(), 512).batch_size == 4096
@@ -298,6 +311,13 @@ def test_default_recipe_trains_and_resumes_on_the_batched_path(tmp_path, monkeyp
     assert [int(r["timesteps"]) for r in rows] == [256, 512, 768, 1024]
     assert float(rows[2]["learning_rate"]) == pytest.approx(adapted)  # the resumed part went on from it
     assert float(rows[-1]["reward_distance"]) < 0  # summed over whole episodes: episode_reward_terms
+    if env == "real":  # the policy acts on the observation it was trained with
+        from rayreach.evaluate.rollout import rollout
+        from rayreach.learning.policy import load_policy
+
+        assert load_policy(out / "model.zip").observation == TrainConfig().observation
+        summary = rollout(out / "model.zip", "random", episodes=1, progress=False)
+        assert summary.episodes == 1
 
 
 def test_bench_train_times_both_recipes(tmp_path, monkeypatch):

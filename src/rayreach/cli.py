@@ -9,7 +9,7 @@ from typing import Sequence
 
 
 EVAL_PLANNERS = "drl,rrt,ncrrt,ompl-rrt,ompl-rrtconnect"
-TRAIN_RECIPES = ("default", "baseline")
+TRAIN_RECIPES = ("default", "baseline", "paper")
 """``rayreach.learning.train.RECIPES``' names (that module imports torch's stack)."""
 
 LAYER_HELP = {"final_approach": "straight final approach near the goal", "ray_shield": "ray shield and its hit memory",
@@ -107,18 +107,20 @@ def build_parser() -> argparse.ArgumentParser:
 
     train = sub.add_parser("train", help="train a PPO policy on random worlds (resumable)")
     train.add_argument("--robot", required=True, help="ur5 or kr16")
-    train.add_argument("--timesteps", type=int, default=2_000_000, help="total environment steps")
+    train.add_argument("--timesteps", type=int, default=None,
+                       help="total environment steps (default: the recipe's, 40 M for default, about 2 h on 2 cores)")
     train.add_argument("--recipe", choices=TRAIN_RECIPES, default="default",
-                       help="default: 256 batched worlds, 4 minibatches x 5 epochs, adaptive lr 1e-3; baseline: "
-                            "the shipped runs' 32 environments in worker processes, 256 x 10 epochs, lr 3e-4 "
-                            "(a resumed run keeps its own)")
+                       help="default: the planner's observation (goal direction, workspace walls, motion, "
+                            "remembered scans), 256 batched worlds, 4 minibatches x 5 epochs, adaptive lr 1e-3; "
+                            "baseline: the shipped runs' 142 values, 32 environments in worker processes, 256 x 10 "
+                            "epochs, lr 3e-4; paper: the paper's agent as published (a resumed run keeps its own)")
     train.add_argument("--envs", type=int, default=None,
                        help="worlds stepped in parallel (default: the recipe's, 256 or 32; the minibatch stays the "
                             "recipe's unless a rollout is smaller)")
     train.add_argument("--workers", type=int, default=None,
                        help="cores to use: worker processes of per-environment stepping and the update's threads "
                             "(default: CPU cores)")
-    train.add_argument("--out", required=True, help="run directory, e.g. runs/ur5")
+    train.add_argument("--out", default=None, help="run directory (default: runs/ROBOT-RECIPE)")
     train.add_argument("--resume", action="store_true", help="continue the checkpoint in --out")
     train.add_argument("--seed", type=int, default=0)
     train.add_argument("--checkpoint-every", type=int, default=100_000, help="steps between checkpoints")
@@ -442,8 +444,10 @@ def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
     from rayreach.learning.train import recipe, train, with_envs
 
     robot = get_robot(args.robot).name
-    config = recipe(args.recipe, robot=robot, timesteps=args.timesteps, seed=args.seed,
-                    checkpoint_every=args.checkpoint_every)
+    config = recipe(args.recipe, robot=robot, seed=args.seed, checkpoint_every=args.checkpoint_every)
+    if args.timesteps is not None:
+        config = replace(config, timesteps=args.timesteps)
+    out = args.out or f"runs/{robot}-{args.recipe}"
     if args.envs is not None:
         config = with_envs(config, args.envs)
     if args.workers is not None:
@@ -473,7 +477,7 @@ def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
         overrides["learning_rate"] = args.learning_rate
     config = replace(config, **overrides)
     command = "rayreach " + " ".join(sys.argv[1:] if argv is None else argv)
-    path = train(config, args.out, resume=args.resume, command=command, resume_overrides=overrides,
+    path = train(config, out, resume=args.resume, command=command, resume_overrides=overrides,
                  critic_warmup=args.critic_warmup, freeze_features=args.freeze_features)
     print(f"model: {path}")
     return 0

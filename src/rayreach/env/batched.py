@@ -2,7 +2,7 @@
 worlds at once.
 
 ``BatchedReachEnv(robot, n_worlds)`` is a stable-baselines3 ``VecEnv``: the same observation
-(142 values, same order), action, reward terms, episode ends and seeding as N ``ReachEnv``
+(the paper's 142 values and any ``EnvConfig.observation`` adds, same order), action, reward terms, episode ends and seeding as N ``ReachEnv``
 objects, world ``i`` seeded as ``ReachEnv.reset(seed=seed + i)`` would be
 (``tests/test_batched_env.py`` steps both through the same worlds). A single env pays
 numpy's per-call overhead on arrays of three to six values in every part of a step; here
@@ -41,6 +41,7 @@ import numpy as np
 from gymnasium.utils import seeding
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices
 
+from rayreach.env.observation import Observer
 from rayreach.env.reach import (N_ROBOT_OBS, OBS_SIZE, REWARD_TERM_NAMES, EnvConfig, make_config,
                                 observation_space, resolve_task)
 from rayreach.env.rewards import ShakeCounter
@@ -128,7 +129,9 @@ class BatchedReachEnv(VecEnv):
         self.fractions = np.ones((n, N_RAYS))
         self.episode_terms = np.zeros((n, len(REWARD_TERM_NAMES)))
         self.converged = np.ones(n, dtype=bool)
-        self.obs = np.zeros((n, OBS_SIZE), dtype=np.float32)
+        self.base_obs = np.zeros((n, OBS_SIZE), dtype=np.float32)
+        """The paper's 142 values of each world; ``observer.obs`` is the observation."""
+        self.observer = Observer(cfg.observation, n, N_RAYS, OBS_SIZE, spec.ee_step)
         self._all = np.arange(n)
         self._actions = np.zeros((n, 6))
         self._fixed_start: np.ndarray | None = None
@@ -136,7 +139,7 @@ class BatchedReachEnv(VecEnv):
         """Seconds spent in each stage of ``step_wait`` so far (a few perf_counter calls a step)."""
         if fixed is not None:
             self._load_fixed(fixed)
-        super().__init__(n, observation_space(spec, ws_high - ws_low),
+        super().__init__(n, self.observer.space(observation_space(spec, ws_high - ws_low)),
                          gym.spaces.Box(-1.0, 1.0, (6,), np.float32))
         if seed is not None:
             self.seed(seed)
@@ -187,10 +190,10 @@ class BatchedReachEnv(VecEnv):
             self.reset_world(i)
         self._reset_seeds()
         self._reset_options()
-        return self.obs.copy()
+        return self.observer.obs.copy()
 
     def reset_world(self, i: int) -> None:
-        """``ReachEnv.reset`` for world ``i``, its observation written into ``self.obs[i]``."""
+        """``ReachEnv.reset`` for world ``i``, its observation written into ``observer.obs[i]``."""
         cfg = self.config
         rng = self.rngs[i]
         assert rng is not None
@@ -216,8 +219,10 @@ class BatchedReachEnv(VecEnv):
         self.shake_length[i] = 0
         self.episode_terms[i] = 0.0
         self.previous_distance[i] = float(np.linalg.norm(self.goals[i, 0] - self.ee_pos[i]))
-        cast_worlds(self.layout, self.frames, self.obstacles, cfg.ray_range, np.array([i]), self.fractions)
-        self._observe(np.array([i]), self.previous_distance)
+        which = np.array([i])
+        cast_worlds(self.layout, self.frames, self.obstacles, cfg.ray_range, which, self.fractions)
+        self._observe(which, self.previous_distance)
+        self.observer.reset(which, *self._observer_args(which))
 
     def step_async(self, actions: np.ndarray) -> None:
         a = np.asarray(actions, dtype=float).reshape(self.num_envs, -1)
@@ -279,6 +284,7 @@ class BatchedReachEnv(VecEnv):
             distance[switch] = _distances(self.goals[switch, self.goal_index[switch]] - self.ee_pos[switch])
         self.previous_distance = distance
         self._observe(self._all, distance)
+        self.observer.step(self._all, *self._observer_args(self._all))
 
         dones = terminated | truncated
         clock.lap("reward_and_obs")
@@ -301,14 +307,20 @@ class BatchedReachEnv(VecEnv):
                 "n_shakes": int(n_shakes[i]),
                 "time": float(self.time[i]),
                 "TimeLimit.truncated": bool(truncated[i]),
-                "terminal_observation": self.obs[i].copy(),
+                "terminal_observation": self.observer.obs[i].copy(),
             }
             self.reset_world(int(i))
         clock.lap("resets")
-        return self.obs.copy(), rewards.astype(np.float32), dones, infos
+        return self.observer.obs.copy(), rewards.astype(np.float32), dones, infos
+
+    def _observer_args(self, which: np.ndarray) -> tuple:
+        """Worlds ``which``'s rows of ``Observer.reset``'s and ``step``'s arguments after ``which``."""
+        return (self.base_obs[which], self.ee_pos[which], self.fractions[which], self.ws_low[which],
+                self.ws_high[which])
 
     def _observe(self, which: np.ndarray, distance: np.ndarray) -> None:
-        obs = self.obs
+        """The paper's 142 values of worlds ``which`` into ``base_obs``."""
+        obs = self.base_obs
         obs[which, 0:6] = self.q[which]
         obs[which, 6:9] = self.goals[which, self.goal_index[which]] - self.ee_pos[which]
         obs[which, 9:12] = _rpy(np.matmul(self.ref_rot_t[which], self.ee_rot[which]))

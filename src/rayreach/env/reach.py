@@ -24,6 +24,10 @@ A NaN or infinite action raises ``ValueError`` and changes nothing.
 13-141   the 129 ray hit fractions in [0, 1] (order: ``rayreach.sim.sensors``)
 =======  ====================================================================
 
+``EnvConfig.observation`` may append more (``rayreach.env.observation``: the goal's
+direction, the workspace's walls, the arm's motion, remembered scans); the default is the
+paper's 142 values alone.
+
 ## Rewards (paper eq. "total reward"), episode end
 
 success +10 when the distance is below ``goal_tolerance`` (the episode ends at the last goal;
@@ -59,6 +63,7 @@ import gymnasium as gym
 import numpy as np
 
 from rayreach.env import rewards as R
+from rayreach.env.observation import ObservationConfig, Observer
 from rayreach.env.perception import Perception
 from rayreach.robots import RobotSpec, get_robot
 from rayreach.scenarios import RANDOM, Scenario, ScenarioError, get_scenario
@@ -99,6 +104,9 @@ class EnvConfig:
     (the damping shrinks for small errors); an unconverged step still moves (``info["ik_converged"]``)."""
     rewards: R.RewardWeights = R.RewardWeights()
     random_world: RandomWorldConfig = field(default_factory=RandomWorldConfig)
+    observation: ObservationConfig = ObservationConfig()
+    """Parts of the observation beyond the paper's 142 values (``rayreach.env.observation``;
+    the default: none, the paper's observation)."""
 
     def __post_init__(self) -> None:
         if not self.goal_tolerance > 0:
@@ -110,6 +118,9 @@ class EnvConfig:
         if not self.control_period > 0:
             raise ValueError(f"control_period must be positive, got {self.control_period}")
 
+
+_FIRST = np.array([0])
+"""``ReachEnv``'s one world, as ``Observer`` indexes worlds."""
 
 OUTCOMES = ("success", "collision", "out_of_bounds", "timeout")
 """How an episode can end (``episode_outcome``)."""
@@ -187,7 +198,8 @@ class ReachEnv(gym.Env):
         self.action_space = gym.spaces.Box(-1.0, 1.0, (6,), dtype=np.float32)
         ws_low = np.asarray(fixed.workspace_low if fixed else self.spec_robot.workspace_low)
         ws_high = np.asarray(fixed.workspace_high if fixed else self.spec_robot.workspace_high)
-        self.observation_space = observation_space(self.spec_robot, ws_high - ws_low)
+        self._paper_space = observation_space(self.spec_robot, ws_high - ws_low)
+        self.set_observation(self.config.observation)
         self.step_scale = np.array([self.spec_robot.ee_step] * 3 + [self.spec_robot.rot_step] * 3)
         """Metres and radians per unit of action: an action times this is the pose step."""
 
@@ -213,6 +225,13 @@ class ReachEnv(gym.Env):
     def set_goal_tolerance(self, tolerance: float) -> None:
         """Change the success radius (used by the goal-size curriculum between episodes)."""
         self.config = make_config(self.config, {"goal_tolerance": float(tolerance)})
+
+    def set_observation(self, observation: ObservationConfig) -> None:
+        """What the observation holds from the next reset on (a policy's ``observation``)."""
+        self.config = make_config(self.config, {"observation": observation})
+        self.observer = Observer(observation, 1, N_RAYS, OBS_SIZE, self.spec_robot.ee_step)
+        self.observation_space = self.observer.space(self._paper_space)
+        self._ready = False
 
     def set_n_obstacles(self, n: int) -> None:
         """Obstacles per random world from the next reset on (obstacle curriculum)."""
@@ -254,7 +273,9 @@ class ReachEnv(gym.Env):
         self.episodes += 1
         info = {"distance": distance, "ee_position": self.ee_pos.copy(), "goal": self.goals[0].copy(),
                 "goal_index": 0, "is_success": False, "collision": False, "out_of_bounds": False}
-        return self._observation(distance, self._cast_rays()), info
+        rays = self._cast_rays()
+        self.observer.reset(*self._observer_args(distance, rays))
+        return self.observer.obs[0].copy(), info
 
     def step(self, action: np.ndarray):
         """The paper's step: the pose step ``action`` (times ``step_scale``) solved by IK and taken."""
@@ -351,7 +372,8 @@ class ReachEnv(gym.Env):
         if terminated or truncated:
             self._ready = False
             info["episode_reward_terms"] = dict(self._episode_terms)
-        return self._observation(distance, rays), float(sum(terms.values())), terminated, truncated, info
+        self.observer.step(*self._observer_args(distance, rays))
+        return self.observer.obs[0].copy(), float(sum(terms.values())), terminated, truncated, info
 
     def _cast_rays(self) -> np.ndarray:
         """Hit fractions of the rays in the current state (kept, with the rays and how far
@@ -371,7 +393,14 @@ class ReachEnv(gym.Env):
                           workspace_low=np.asarray(scenario.workspace_low),  # type: ignore[union-attr]
                           workspace_high=np.asarray(scenario.workspace_high))  # type: ignore[union-attr]
 
+    def _observer_args(self, distance: float, rays: np.ndarray) -> tuple:
+        """This world's row of ``Observer.reset``'s and ``step``'s arguments."""
+        scenario = self.scenario
+        return (_FIRST, self._observation(distance, rays)[None], self.ee_pos[None], rays[None],
+                np.asarray(scenario.workspace_low)[None], np.asarray(scenario.workspace_high)[None])  # type: ignore[union-attr]
+
     def _observation(self, distance: float, rays: np.ndarray) -> np.ndarray:
+        """The paper's 142 values."""
         obs = np.empty(OBS_SIZE, dtype=np.float32)
         obs[0:6] = self.q
         obs[6:9] = self.goals[self.goal_index] - self.ee_pos

@@ -25,7 +25,7 @@ def bench_acting(model: str | Path, episodes: int = 10, n_obstacles: int | None 
     of ``split``. Interleaved episode by episode, so a change in the machine's speed hits
     every variant alike."""
     policy = load_policy(model)
-    base = ReachEnv(robot=policy.robot, scenario="random")
+    base = ReachEnv(robot=policy.robot, scenario="random", observation=policy.observation)
     trained = policy.meta.get("state", {}).get("obstacles", {}).get("count", 0)
     base.set_n_obstacles(trained if n_obstacles is None else n_obstacles)
     envs = {name: ActingEnv(base, config) for name, config in VARIANTS.items()}

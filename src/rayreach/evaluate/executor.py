@@ -197,6 +197,8 @@ class Executor:
 
     def _run_reactive(self, planner: ReactivePlanner, seed: int) -> RunRecord:
         env = self.acting_env(planner.acting)
+        if self.env.config.observation != planner.observation:
+            self.env.set_observation(planner.observation)
         planner.reset(seed)
         episode = run_episode(env, planner.act, seed)
         info = episode.info

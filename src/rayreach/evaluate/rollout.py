@@ -80,7 +80,7 @@ def rollout(
     policy = load_policy(model)
     agent = ActingPolicy(policy, deterministic=deterministic, resample=acting.resample)
     base = ReachEnv(robot=policy.robot, scenario=scenario, goal_tolerance=goal_tolerance,
-                    random_world=RandomWorldConfig(start_clearance=start_clearance))
+                    random_world=RandomWorldConfig(start_clearance=start_clearance), observation=policy.observation)
     env = ActingEnv(base, acting)
     if random:
         trained = policy.meta.get("state", {}).get("obstacles", {}).get("count", 0)

@@ -8,6 +8,7 @@ from typing import Any
 
 import numpy as np
 
+from rayreach.env.observation import ObservationConfig
 from rayreach.learning.bundles import CheckpointError, Normalization, read_bundle_meta
 
 
@@ -23,6 +24,13 @@ class Policy:
     @property
     def robot(self) -> str:
         return str(self.meta["robot"])
+
+    @property
+    def observation(self) -> ObservationConfig:
+        """What the policy was trained to see (the paper's 142 values where its run predates
+        the choice)."""
+        saved = self.meta.get("config", {}).get("observation")
+        return ObservationConfig(**saved) if saved else ObservationConfig()
 
     def act(self, obs: np.ndarray, deterministic: bool = True) -> np.ndarray:
         action, _ = self.model.predict(self._normalized(obs), deterministic=deterministic)

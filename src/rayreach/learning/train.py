@@ -25,6 +25,7 @@ import numpy as np
 
 from rayreach.learning.curriculum import AugmentedGoalSize, GoalSizeParams, ObstacleCurriculum, ObstacleParams
 from rayreach.learning.bundles import CheckpointError, read_bundle_meta, restore_normalization, save_bundle
+from rayreach.env.observation import ObservationConfig
 from rayreach.env.rewards import RewardWeights
 
 CHECKPOINT = "checkpoint.zip"
@@ -58,7 +59,8 @@ class TrainConfig:
     minibatches cost no more than one."""
 
     robot: str = "ur5"
-    timesteps: int = 2_000_000
+    timesteps: int = 40_000_000
+    """Environment steps of the whole run: about 2 h of the default recipe on two cores."""
     envs: int = 256
     """Worlds stepped in parallel (baseline: 32 environments split over ``workers``)."""
     vec_env: str = "batched"
@@ -127,6 +129,10 @@ class TrainConfig:
     followed (docs/acting.md, "Training with the layers"). The layers wrap each ``ReachEnv``,
     so the worlds are stepped per environment whatever ``vec_env`` says; each costs about
     56 MB and 0.5 s to build, so give it the baseline's 32."""
+    observation: ObservationConfig = ObservationConfig.planner()
+    """What the policy sees beyond the paper's 142 values (``rayreach.env.observation``; not in
+    the paper): the goal's direction, the workspace's walls, its own motion and three ray
+    scans of the last 24 steps."""
     checkpoint_every: int = 100_000
     goal: GoalSizeParams = field(default_factory=GoalSizeParams)
     obstacles: ObstacleParams = field(default_factory=ObstacleParams)
@@ -148,14 +154,24 @@ class TrainConfig:
         return self.vec_env == "batched" and not self.acting_layers
 
 
+PAPER_PPO = {"batch_size": 256, "learning_rate": 3e-4, "lr_schedule": "constant", "vf_coef": 0.5,
+             "max_grad_norm": 0.5, "n_steps": 256, "n_epochs": 10}
+"""The paper's table "Hyperparameter for training" (and SB3's 10 epochs, which the paper's
+code used), over 32 worlds x 256 steps: 8,192 samples per update."""
+
 RECIPES: dict[str, TrainConfig] = {
     "default": TrainConfig(),
-    "baseline": TrainConfig(envs=32, vec_env="workers", batch_size=256, learning_rate=3e-4,
-                            lr_schedule="constant", vf_coef=0.5, max_grad_norm=0.5, n_steps=256, n_epochs=10),
+    "baseline": TrainConfig(envs=32, vec_env="workers", observation=ObservationConfig(), timesteps=20_000_000,
+                            **PAPER_PPO),
+    "paper": TrainConfig(envs=32, timesteps=20_000_000, observation=ObservationConfig(), normalize=False, progress_weight=0.0,
+                         proximity_weight=0.0, true_goal_share=0.0, target_kl=None, **PAPER_PPO),
 }
-"""Named starting points of a run. "baseline" is the recipe of the shipped runs: 32 worlds in
-``workers`` processes, 8,192 samples per update in minibatches of 256 x 10 epochs, the
-paper's PPO values throughout."""
+"""Named starting points of a run. "default": the planner's observation on batched worlds
+with rsl_rl's large-batch update. "baseline": the recipe of the shipped runs, 32 worlds in
+``workers`` processes and the paper's PPO values with the shaping the shipped runs added
+(observation and reward normalisation, progress and proximity terms, true-size episodes,
+``target_kl``). "paper": the paper's agent as published, its 142 values, reward, PPO values
+and curricula and nothing else (stepped in one ``BatchedReachEnv``, the same MDP)."""
 
 
 def recipe(name: str, **changes: Any) -> TrainConfig:
@@ -187,6 +203,7 @@ def env_config(config: TrainConfig):
         rewards=replace(RewardWeights(), progress=config.progress_weight, proximity=config.proximity_weight,
                         shielded=config.shield_weight),
         random_world=RandomWorldConfig(n_obstacles=config.obstacles.start),
+        observation=config.observation,
     )
 
 
@@ -554,11 +571,12 @@ def git_commit() -> str:
 
 def bundle_meta(config: TrainConfig, state: TrainState, steps: int, kind: str) -> dict[str, Any]:
     from rayreach.env.reach import OBS_SIZE
+    from rayreach.sim.sensors import N_RAYS
 
     return {
         "kind": kind,
         "robot": config.robot,
-        "obs_shape": [OBS_SIZE],
+        "obs_shape": [OBS_SIZE + config.observation.extra_size(N_RAYS)],
         "timesteps": int(steps),
         "config": asdict(config),
         "state": state.to_dict(),
@@ -576,6 +594,8 @@ def config_from_meta(meta: dict[str, Any]) -> TrainConfig:
         data.setdefault(f.name, getattr(RECIPES["baseline"], f.name))
     data["goal"] = GoalSizeParams(**data["goal"])
     data["obstacles"] = ObstacleParams(**data["obstacles"])
+    if isinstance(data["observation"], dict):
+        data["observation"] = ObservationConfig(**data["observation"])
     data["features"] = tuple(data["features"])
     data["heads"] = tuple(data["heads"])
     return TrainConfig(**data)

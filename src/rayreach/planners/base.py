@@ -14,6 +14,7 @@ from typing import Any, Callable
 import numpy as np
 
 from rayreach.acting.config import ActingConfig
+from rayreach.env.observation import ObservationConfig
 from rayreach.planners.collision import CollisionChecker
 from rayreach.planners.result import PlanResult
 from rayreach.planners.smoothing import ShortcutConfig, shortcut
@@ -37,6 +38,8 @@ class ReactivePlanner(ABC):
     acting: ActingConfig = ActingConfig()
     """The acting layers the executor runs the planner's actions through
     (``ActingConfig.off()``: the actions as they come, as the paper's agent acted)."""
+    observation: ObservationConfig = ObservationConfig()
+    """What the planner's observations hold (``rayreach.env.observation``)."""
 
     def reset(self, seed: int) -> None:
         """Called before each run with the run's seed (for a planner that draws at random)."""

@@ -39,6 +39,7 @@ class DRLPlanner(ReactivePlanner):
         self.deterministic = deterministic
         self.acting = acting
         self.name = name
+        self.observation = self.policy.observation
         self._acting = ActingPolicy(self.policy, deterministic=deterministic, resample=acting.resample)
 
     @property

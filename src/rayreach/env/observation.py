@@ -1,0 +1,160 @@
+"""What a policy sees beyond the paper's 142 values: the goal's direction, the workspace's
+walls, its own motion, and what the rays saw a moment ago.
+
+The paper's observation (``ObservationConfig()``, every part off) tells a policy where the
+goal is and what is within 0.4 m now. Two things it lacks cost most of a memoryless
+policy's failures (docs/training.md): the workspace's bounds, which no ray sees (a third of
+the shipped UR5 policy's failures left the workspace), and what the arm passed a moment ago,
+behind rays that no longer see it (two worlds alike now but unlike a second ago ask for
+unlike actions). ``ObservationConfig.planner()`` adds both, with the goal's direction at any
+distance (the goal offset in metres, normalised by its spread over the workspace, hardly
+changes over the last centimetre).
+
+``Observer`` appends the parts to the paper's values for N worlds at once; ``ReachEnv`` uses
+one with N = 1, ``BatchedReachEnv`` one with N worlds, so both give the same observation.
+Appended, in this order, after the paper's 142 values:
+
+===================  ======  =============================================================
+goal_direction       6       unit vector to the goal, then the goal offset over ``NEAR``
+                             clipped to [-1, 1] (world frame)
+workspace            6       end effector minus the workspace's low corner, then its high
+                             corner minus the end effector, m, at most ``WALL_RANGE``
+motion               3       the end effector's last step, in units of the action's ``ee_step``
+scans x (129 + 3)    each    a ray scan of ``scan_stride`` x (k + 1) steps ago (k = 0, 1, ..):
+                             its 129 fractions, then where the end effector was then minus
+                             where it is now, m (the episode's first scan until it has gone by)
+===================  ======  =============================================================
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import gymnasium as gym
+import numpy as np
+
+NEAR = 0.05
+"""Goal offsets up to this, m, span the whole [-1, 1] of the fine offset."""
+WALL_RANGE = 0.3
+"""Workspace walls farther than this, m, read as this: the policy sees the walls near it, as
+the rays see obstacles, and a larger user workspace looks like the training one."""
+SCAN_OFFSET_RANGE = 1.0
+"""Bound on a remembered scan's end-effector offset, m (for the observation space)."""
+
+
+@dataclass(frozen=True)
+class ObservationConfig:
+    """The parts of the observation beyond the paper's; all off is the paper's observation."""
+
+    goal_direction: bool = False
+    workspace: bool = False
+    motion: bool = False
+    scans: int = 0
+    """Remembered ray scans (0: none)."""
+    scan_stride: int = 8
+    """Steps between remembered scans: 8 steps of at most 5 mm is up to 4 cm of travel."""
+
+    def __post_init__(self) -> None:
+        if self.scans < 0:
+            raise ValueError(f"scans must be >= 0, got {self.scans}")
+        if self.scan_stride < 1:
+            raise ValueError(f"scan_stride must be >= 1, got {self.scan_stride}")
+
+    @classmethod
+    def planner(cls) -> "ObservationConfig":
+        """Every part on, three scans 8, 16 and 24 steps back."""
+        return cls(goal_direction=True, workspace=True, motion=True, scans=3)
+
+    @property
+    def is_paper(self) -> bool:
+        return self.extra_size(0) == 0
+
+    def extra_size(self, n_rays: int) -> int:
+        """Values appended after the paper's, for ``n_rays`` rays."""
+        return 6 * self.goal_direction + 6 * self.workspace + 3 * self.motion + self.scans * (n_rays + 3)
+
+
+class Observer:
+    """The observation of ``n_worlds`` worlds: the paper's values, then ``config``'s parts.
+
+    ``reset`` starts a world's memory, ``step`` adds a step to it; both write the worlds'
+    rows of ``obs``, which the caller copies."""
+
+    def __init__(self, config: ObservationConfig, n_worlds: int, n_rays: int, base_size: int,
+                 ee_step: float) -> None:
+        self.config = config
+        self.n_rays = n_rays
+        self.base_size = base_size
+        self.ee_step = ee_step
+        self.size = base_size + config.extra_size(n_rays)
+        self.obs = np.zeros((n_worlds, self.size), dtype=np.float32)
+        self.length = config.scan_stride * config.scans + 1
+        """Scans kept per world: the oldest remembered one is ``length - 1`` steps back."""
+        self.scan_rays = np.ones((n_worlds, self.length if config.scans else 0, n_rays))
+        self.scan_ee = np.zeros((n_worlds, self.length if config.scans else 0, 3))
+        self.t = np.zeros(n_worlds, dtype=np.int64)
+        self.last_ee = np.zeros((n_worlds, 3))
+
+    def space(self, base: gym.spaces.Box) -> gym.spaces.Box:
+        """``base`` (the paper's bounds) with the appended parts' bounds."""
+        c = self.config
+        low, high = [base.low], [base.high]
+        if c.goal_direction:
+            low.append(-np.ones(6))
+            high.append(np.ones(6))
+        if c.workspace:
+            low.append(np.full(6, -2 * self.ee_step))
+            high.append(np.full(6, WALL_RANGE))
+        if c.motion:
+            low.append(np.full(3, -2.0))
+            high.append(np.full(3, 2.0))
+        for _ in range(c.scans):
+            low.append(np.concatenate((np.zeros(self.n_rays), np.full(3, -SCAN_OFFSET_RANGE))))
+            high.append(np.concatenate((np.ones(self.n_rays), np.full(3, SCAN_OFFSET_RANGE))))
+        return gym.spaces.Box(np.concatenate(low).astype(np.float32), np.concatenate(high).astype(np.float32),
+                              dtype=np.float32)
+
+    def reset(self, which: np.ndarray, base: np.ndarray, ee: np.ndarray, rays: np.ndarray,
+              ws_low: np.ndarray, ws_high: np.ndarray) -> None:
+        """Worlds ``which`` start an episode: their memory holds only this moment."""
+        self.t[which] = 0
+        self.last_ee[which] = ee
+        if self.config.scans:
+            self.scan_rays[which] = rays[:, None, :]
+            self.scan_ee[which] = ee[:, None, :]
+        self._write(which, base, ee, rays, ws_low, ws_high)
+
+    def step(self, which: np.ndarray, base: np.ndarray, ee: np.ndarray, rays: np.ndarray,
+             ws_low: np.ndarray, ws_high: np.ndarray) -> None:
+        """Worlds ``which`` took a step; ``base`` is their paper observation after it."""
+        self.t[which] += 1
+        if self.config.scans:
+            slot = self.t[which] % self.length
+            self.scan_rays[which, slot] = rays
+            self.scan_ee[which, slot] = ee
+        self._write(which, base, ee, rays, ws_low, ws_high)
+        self.last_ee[which] = ee
+
+    def _write(self, which, base, ee, rays, ws_low, ws_high) -> None:
+        c, out = self.config, self.obs
+        out[which, : self.base_size] = base
+        k = self.base_size
+        if c.goal_direction:
+            offset = base[:, 6:9].astype(float)
+            distance = np.maximum(np.linalg.norm(offset, axis=1, keepdims=True), 1e-9)
+            out[which, k: k + 3] = offset / distance
+            out[which, k + 3: k + 6] = np.clip(offset / NEAR, -1.0, 1.0)
+            k += 6
+        if c.workspace:
+            out[which, k: k + 3] = np.minimum(ee - ws_low, WALL_RANGE)
+            out[which, k + 3: k + 6] = np.minimum(ws_high - ee, WALL_RANGE)
+            k += 6
+        if c.motion:
+            out[which, k: k + 3] = np.clip((ee - self.last_ee[which]) / self.ee_step, -2.0, 2.0)
+            k += 3
+        for back in range(c.scans):
+            slot = (self.t[which] - c.scan_stride * (back + 1)) % self.length
+            out[which, k: k + self.n_rays] = self.scan_rays[which, slot]
+            out[which, k + self.n_rays: k + self.n_rays + 3] = np.clip(
+                self.scan_ee[which, slot] - ee, -SCAN_OFFSET_RANGE, SCAN_OFFSET_RANGE)
+            k += self.n_rays + 3

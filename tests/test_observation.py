@@ -1,0 +1,80 @@
+"""The observation's parts beyond the paper's, against what the environment did step by step."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from rayreach.env.observation import NEAR, WALL_RANGE, ObservationConfig
+from rayreach.env.reach import OBS_SIZE, ReachEnv
+from rayreach.sim.sensors import N_RAYS
+
+
+def test_the_default_is_the_papers_observation():
+    env = ReachEnv(robot="ur5")
+    try:
+        obs, _ = env.reset(seed=3)
+        assert obs.shape == env.observation_space.shape == (OBS_SIZE,)
+        assert ObservationConfig().is_paper and not ObservationConfig.planner().is_paper
+    finally:
+        env.close()
+
+
+def test_planner_parts_hold_the_goal_the_walls_the_motion_and_past_scans():
+    config = ObservationConfig.planner()
+    env = ReachEnv(robot="ur5", observation=config, max_steps=200)
+    rng = np.random.default_rng(0)
+    try:
+        obs, _ = env.reset(seed=5)
+        assert obs.shape == env.observation_space.shape == (OBS_SIZE + 15 + 3 * (N_RAYS + 3),)
+        rays, ees, last = [env._ray_fractions.copy()], [env.ee_pos.copy()], env.ee_pos.copy()
+        low, high = np.asarray(env.scenario.workspace_low), np.asarray(env.scenario.workspace_high)
+        for t in range(1, 60):
+            obs, _, terminated, truncated, _ = env.step(rng.uniform(-0.3, 0.3, 6).astype(np.float32))
+            assert not (terminated or truncated), "the test wants 60 steps of one episode"
+            rays.append(env._ray_fractions.copy())
+            ees.append(env.ee_pos.copy())
+            assert env.observation_space.contains(obs)
+            np.testing.assert_array_equal(obs[:OBS_SIZE][13:], env._ray_fractions.astype(np.float32))
+            k = OBS_SIZE
+            offset = env.goals[0] - env.ee_pos
+            np.testing.assert_allclose(obs[k:k + 3], offset / np.linalg.norm(offset), atol=1e-5)
+            np.testing.assert_allclose(obs[k + 3:k + 6], np.clip(offset / NEAR, -1, 1), atol=1e-4)
+            k += 6
+            np.testing.assert_allclose(obs[k:k + 3], np.minimum(env.ee_pos - low, WALL_RANGE), atol=1e-6)
+            np.testing.assert_allclose(obs[k + 3:k + 6], np.minimum(high - env.ee_pos, WALL_RANGE), atol=1e-6)
+            k += 6
+            np.testing.assert_allclose(obs[k:k + 3], (env.ee_pos - last) / env.spec_robot.ee_step, atol=1e-5)
+            last = env.ee_pos.copy()
+            k += 3
+            for back in range(3):
+                then = max(0, t - 8 * (back + 1))
+                np.testing.assert_allclose(obs[k:k + N_RAYS], rays[then], atol=1e-6, err_msg=f"t={t} scan {back}")
+                np.testing.assert_allclose(obs[k + N_RAYS:k + N_RAYS + 3], ees[then] - env.ee_pos, atol=1e-6)
+                k += N_RAYS + 3
+        assert np.ptp(np.array(rays), axis=0).max() > 0.05, "the scans should differ for the test to tell them apart"
+        obs, _ = env.reset(seed=6)  # a new episode remembers nothing of the last
+        k = OBS_SIZE + 15
+        np.testing.assert_allclose(obs[k:k + N_RAYS], env._ray_fractions, atol=1e-6)
+        np.testing.assert_allclose(obs[k + N_RAYS:k + N_RAYS + 3], 0.0, atol=1e-12)
+    finally:
+        env.close()
+
+
+def test_set_observation_changes_the_space_from_the_next_reset():
+    env = ReachEnv(robot="ur5")
+    try:
+        env.reset(seed=1)
+        env.set_observation(ObservationConfig(workspace=True))
+        with pytest.raises(RuntimeError, match="reset"):
+            env.step(np.zeros(6, dtype=np.float32))
+        obs, _ = env.reset(seed=1)
+        assert obs.shape == env.observation_space.shape == (OBS_SIZE + 6,)
+    finally:
+        env.close()
+
+
+@pytest.mark.parametrize("bad", [{"scans": -1}, {"scan_stride": 0}])
+def test_bad_settings_are_refused(bad):
+    with pytest.raises(ValueError, match=next(iter(bad))):
+        ObservationConfig(**bad)
