@@ -183,3 +183,10 @@ def test_the_planner_observation_steps_as_reach_env_does():
     outcomes = _compare("ur5", "random", 8, 30, max_steps=100, goal_tolerance=0.1,
                         observation=ObservationConfig.planner())
     assert sum(outcomes.values()) >= 30
+
+
+def test_broad_worlds_step_as_reach_env_does():
+    from rayreach.env.observation import ObservationConfig
+
+    outcomes = _compare("ur5", "broad", 4, 8, max_steps=60, goal_tolerance=0.1, observation=ObservationConfig.planner())
+    assert sum(outcomes.values()) >= 8

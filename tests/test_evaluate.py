@@ -82,6 +82,27 @@ def test_a_random_experiment_with_a_count_plays_the_rollout_worlds_of_that_count
         env.close()
 
 
+def test_a_broad_experiment_plays_the_broad_worlds_of_its_split():
+    from rayreach.scenarios.broad_world import broad_kinds, broad_workspace
+
+    assert runner.random_experiment("ur5", 2, "test", "broad") == "broad-ur5:2@test"
+    assert runner.parse_random("broad-ur5:2@test", 3) == runner.RandomExperiment("ur5", 2, "test", "broad")
+    assert parse_experiments("broad-kr16@validation,exp1") == ("broad-kr16@validation", "exp1")
+    assert runner.run_seed("broad-ur5@test", 4) == 9_000_004
+    with pytest.raises(ValueError, match="random, broad"):
+        runner.random_experiment("ur5", 2, "test", "wide")
+    worker = runner.Worker(EvaluationConfig(("broad-ur5:2@test",), ("drl-alone",), runs=1, workers=1))
+    try:
+        ex = worker.executor("broad-ur5:2@test")
+        ex.reset(runner.run_seed("broad-ur5:2@test", 0))
+        assert len(broad_kinds(ex.env.scenario)) == 2 and ex.env.scenario.name == "broad"
+        low, high = broad_workspace(ex.env.spec_robot)
+        np.testing.assert_array_equal(ex.env.scenario.workspace_low, low)
+        assert ex.env.observation_space.shape == (142,)
+    finally:
+        worker.close()
+
+
 def test_unknown_planner_is_refused_with_the_valid_names():
     with pytest.raises(ValueError, match="ompl-rrtconnect"):
         EvaluationConfig(("exp1",), ("prm",))
@@ -187,7 +208,7 @@ def test_evaluate_refuses_an_obstacle_count_outside_the_random_suite(tmp_path, c
     from rayreach.cli import main
 
     assert main(["evaluate", "--experiments", "1", "--obstacles", "2", "--out", str(tmp_path)]) == 2
-    assert "--suite random" in capsys.readouterr().err
+    assert "--suite random or broad" in capsys.readouterr().err
 
 
 class FakeExecutor:

@@ -85,8 +85,10 @@ def build_parser() -> argparse.ArgumentParser:
                          "(one layer off), rrt, birrt, ncrrt, ompl-rrt, ompl-rrtconnect "
                          f"(default {EVAL_PLANNERS}; --suite random: drl,drl-alone)")
     ev.add_argument("--runs", type=int, default=30, help="runs per experiment and planner")
-    ev.add_argument("--suite", choices=["random"], default=None,
-                    help="random worlds instead of --experiments, from --split's seeds (disjoint from training)")
+    ev.add_argument("--suite", choices=["random", "broad"], default=None,
+                    help="worlds drawn instead of --experiments, from --split's seeds (disjoint from training): "
+                         "random, the training worlds; broad, tables, shelves, boxes, clutter and walls in the "
+                         "arm's reach")
     ev.add_argument("--split", choices=EVALUATION_SPLITS, default=None,
                     help="seed split of --suite random (default test; stored as experiment random-ROBOT@SPLIT): "
                          "tune on validation, quote test")
@@ -360,18 +362,18 @@ def _evaluate(args: argparse.Namespace) -> int:
     from rayreach.evaluate.report import summarise
     from rayreach.evaluate.runner import random_experiment
 
-    default_planners = "drl,drl-alone" if args.suite == "random" else EVAL_PLANNERS
+    default_planners = "drl,drl-alone" if args.suite else EVAL_PLANNERS
     planners = tuple(p.strip() for p in (args.planners or default_planners).split(",") if p.strip())
     runs = args.runs
-    if args.suite == "random":
+    if args.suite:
         obstacles = None if args.obstacles == EvaluationConfig.obstacles else args.obstacles
-        experiments = tuple(random_experiment(r.strip(), obstacles, args.split or "test")
+        experiments = tuple(random_experiment(r.strip(), obstacles, args.split or "test", args.suite)
                             for r in args.robot.split(",") if r.strip())
         runs = args.episodes or 500
     else:
         for option, value in (("--obstacles", args.obstacles), ("--split", args.split)):
             if value is not None:
-                raise ValueError(f"{option} applies to --suite random (the experiments' scenes are fixed)")
+                raise ValueError(f"{option} applies to --suite random or broad (the experiments' scenes are fixed)")
         experiments = parse_experiments(args.experiments)
     models = tuple((robot, path) for robot, path in (("ur5", args.model_ur5), ("kr16", args.model_kr16)) if path)
     config = EvaluationConfig(experiments, planners, runs=runs, time_limit=args.time_limit,
@@ -383,7 +385,7 @@ def _evaluate(args: argparse.Namespace) -> int:
     if not args.report_only:
         evaluate(config, args.out)
     written = write_report(args.out)
-    if args.suite == "random":
+    if args.suite:
         from rayreach.evaluate.store import ResultsStore
 
         store = ResultsStore(written["table"].parent / "results.db")

@@ -47,7 +47,7 @@ from rayreach.env.reach import (N_ROBOT_OBS, OBS_SIZE, REWARD_TERM_NAMES, EnvCon
 from rayreach.env.rewards import ShakeCounter
 from rayreach.scenarios import RANDOM, Scenario
 from rayreach.scenarios.feasibility import solve_start, validate
-from rayreach.scenarios.random_world import RandomWorlds
+from rayreach.scenarios.suites import suite_workspace, world_sampler
 from rayreach.sim.batch_collision import CollisionWorlds, candidates
 from rayreach.sim.batch_kinematics import solve_steps
 from rayreach.sim.batch_obstacles import ObstacleBatch
@@ -96,13 +96,13 @@ class BatchedReachEnv(VecEnv):
         self.layout = RayArrays.of(RayModel(spec, cfg.ray_range))
         self.collision = CollisionWorlds(spec, n_worlds, base_pos, base_rpy)
         self.spheres = self.collision.spheres
-        self.samplers = [RandomWorlds(self.kin, self.collision.slot(i), cfg.random_world)
+        self.samplers = [world_sampler(str(scenario), self.kin, self.collision.slot(i), cfg.random_world)
                          for i in range(n_worlds)] if self.random else []
         """World ``i`` is drawn where it is tested, as ``ReachEnv`` draws in its scene."""
         self.obstacles = ObstacleBatch(n_worlds)
         n = n_worlds
-        ws_low = np.asarray(fixed.workspace_low if fixed else spec.workspace_low, dtype=float)
-        ws_high = np.asarray(fixed.workspace_high if fixed else spec.workspace_high, dtype=float)
+        ws_low, ws_high = ((np.asarray(fixed.workspace_low, dtype=float), np.asarray(fixed.workspace_high, dtype=float))
+                           if fixed else suite_workspace(str(scenario), spec))
         self.step_scale = np.array([spec.ee_step] * 3 + [spec.rot_step] * 3)
         self.render_mode = None
         self.rngs: list[np.random.Generator | None] = [None] * n

@@ -66,9 +66,10 @@ from rayreach.env import rewards as R
 from rayreach.env.observation import ObservationConfig, Observer
 from rayreach.env.perception import Perception
 from rayreach.robots import RobotSpec, get_robot
-from rayreach.scenarios import RANDOM, Scenario, ScenarioError, get_scenario
+from rayreach.scenarios import RANDOM, WORLD_SUITES, Scenario, ScenarioError, get_scenario
 from rayreach.scenarios.feasibility import solve_start, validate
-from rayreach.scenarios.random_world import RandomWorldConfig, RandomWorlds
+from rayreach.scenarios.random_world import RandomWorldConfig
+from rayreach.scenarios.suites import suite_workspace, world_sampler
 from rayreach.sim.kinematics import IKParams, IKResult, Kinematics
 from rayreach.sim.scene import Scene
 from rayreach.sim.sensors import N_RAYS, RAY_RANGE, RayModel
@@ -155,12 +156,12 @@ def make_config(config: EnvConfig | None, overrides: dict[str, Any]) -> EnvConfi
 
 
 def resolve_task(robot: str | RobotSpec | None, scenario: str | Path | Scenario) -> tuple[RobotSpec, Scenario | None]:
-    """The robot and the fixed scenario (None for random worlds) an environment is made for;
-    the robot may be left out where the scenario names it."""
-    fixed = None if isinstance(scenario, str) and scenario == RANDOM else get_scenario(scenario)
+    """The robot and the fixed scenario (None for a suite of drawn worlds, ``WORLD_SUITES``)
+    an environment is made for; the robot may be left out where the scenario names it."""
+    fixed = None if isinstance(scenario, str) and scenario in WORLD_SUITES else get_scenario(scenario)
     if robot is None:
         if fixed is None:
-            raise ValueError("a random-world environment needs a robot (ur5 or kr16)")
+            raise ValueError(f"an environment of {scenario} worlds needs a robot (ur5 or kr16)")
         robot = fixed.robot
     spec = get_robot(robot)
     if fixed is not None and fixed.robot != spec.name:
@@ -192,12 +193,15 @@ class ReachEnv(gym.Env):
         self.kin = Kinematics(self.spec_robot, base_pos, base_rpy)
         self.scene = Scene(self.spec_robot, base_pos, base_rpy, gui=render_mode == "human")
         self.rays = RayModel(self.spec_robot, self.config.ray_range)
-        self.worlds = RandomWorlds(self.kin, self.scene, self.config.random_world) if self.random else None
+        self.suite = str(scenario) if self.random else None
+        """``random`` or ``broad`` (``WORLD_SUITES``) where worlds are drawn at reset."""
+        self.worlds = (world_sampler(self.suite, self.kin, self.scene, self.config.random_world)
+                       if self.suite else None)
         self.n_obstacles = self.config.random_world.n_obstacles
 
         self.action_space = gym.spaces.Box(-1.0, 1.0, (6,), dtype=np.float32)
-        ws_low = np.asarray(fixed.workspace_low if fixed else self.spec_robot.workspace_low)
-        ws_high = np.asarray(fixed.workspace_high if fixed else self.spec_robot.workspace_high)
+        ws_low, ws_high = ((np.asarray(fixed.workspace_low), np.asarray(fixed.workspace_high)) if fixed
+                           else suite_workspace(self.suite, self.spec_robot))
         self._paper_space = observation_space(self.spec_robot, ws_high - ws_low)
         self.set_observation(self.config.observation)
         self.step_scale = np.array([self.spec_robot.ee_step] * 3 + [self.spec_robot.rot_step] * 3)

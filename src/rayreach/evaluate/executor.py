@@ -192,7 +192,8 @@ class Executor:
     def _record(self, planner, seed: int, **values: Any) -> RunRecord:
         values.setdefault("config", planner.config())
         values["execution_time"] = values["planning_time"] + values["motion_time"]
-        return RunRecord(planner=planner.name, scenario=self.env.scenario.name if not self.env.random else "random",
+        scenario = self.env.suite if self.env.random else self.env.scenario.name
+        return RunRecord(planner=planner.name, scenario=scenario,
                          seed=seed, **values)
 
     def _run_reactive(self, planner: ReactivePlanner, seed: int) -> RunRecord:

@@ -18,13 +18,19 @@ from rayreach.evaluate.store import ResultsStore
 from rayreach.evaluate.executor import ExecutionConfig, Executor, RunRecord
 from rayreach.planners import PLANNER_NAMES, GlobalPlanner, ReactivePlanner, make_planner
 from rayreach.robots import get_robot
-from rayreach.scenarios import EXPERIMENTS
+from rayreach.scenarios import EXPERIMENTS, RANDOM, WORLD_SUITES
 from rayreach.scenarios.splits import EVALUATION_SPLITS, get_split
 
-RANDOM_PREFIX = "random-"
+SUITE_PREFIXES = tuple(f"{suite}-" for suite in WORLD_SUITES)
 """Experiment names ``random-ur5@test`` / ``random-kr16@validation``: random worlds of that
 robot from that seed split (``rayreach.scenarios.splits``), with ``EvaluationConfig.obstacles``
-each; ``random-ur5:2@test``: with 2 obstacles each."""
+each; ``random-ur5:2@test``: with 2 obstacles each. ``broad-ur5@test``: the same of the broad
+suite (``rayreach.scenarios.suites``)."""
+
+
+def is_drawn(experiment: str) -> bool:
+    """Whether ``experiment`` names worlds drawn from a suite (``random-...``, ``broad-...``)."""
+    return experiment.startswith(SUITE_PREFIXES)
 
 UNSPLIT = "validation"
 """The split of a random experiment named without one (``random-ur5``, ``random-ur5:2``):
@@ -37,24 +43,29 @@ is closed for a new scene, so a worker's memory stays flat however many scenes i
 
 @dataclass(frozen=True)
 class RandomExperiment:
-    """What a ``random-ROBOT[:N][@SPLIT]`` experiment name says."""
+    """What a ``SUITE-ROBOT[:N][@SPLIT]`` experiment name says."""
 
     robot: str
     obstacles: int
     split: str
+    suite: str = RANDOM
 
 
-def random_experiment(robot: str, obstacles: int | None = None, split: str = "test") -> str:
-    """The experiment name of ``robot``'s random worlds from ``split`` (``obstacles`` None: the
-    config's count); the split is part of the name so its results never mix with another's."""
+def random_experiment(robot: str, obstacles: int | None = None, split: str = "test", suite: str = RANDOM) -> str:
+    """The experiment name of ``robot``'s worlds of ``suite`` from ``split`` (``obstacles``
+    None: the config's count); the split is part of the name so its results never mix with
+    another's."""
     if split not in EVALUATION_SPLITS:
         raise ValueError(f"unknown evaluation split '{split}'; valid: {', '.join(EVALUATION_SPLITS)}")
-    return f"{RANDOM_PREFIX}{robot}" + ("" if obstacles is None else f":{obstacles}") + f"@{split}"
+    if suite not in WORLD_SUITES:
+        raise ValueError(f"unknown world suite '{suite}'; valid: {', '.join(WORLD_SUITES)}")
+    return f"{suite}-{robot}" + ("" if obstacles is None else f":{obstacles}") + f"@{split}"
 
 
 def parse_random(experiment: str, default_obstacles: int) -> RandomExperiment:
-    """Robot, obstacles per world and seed split of a ``random-ROBOT[:N][@SPLIT]`` name."""
-    body, at, split = experiment[len(RANDOM_PREFIX):].partition("@")
+    """Robot, obstacles per world, seed split and suite of a ``SUITE-ROBOT[:N][@SPLIT]`` name."""
+    suite, _, rest = experiment.partition("-")
+    body, at, split = rest.partition("@")
     if not at:
         split = UNSPLIT
     elif split not in EVALUATION_SPLITS:
@@ -62,11 +73,11 @@ def parse_random(experiment: str, default_obstacles: int) -> RandomExperiment:
                          f"valid: {', '.join(EVALUATION_SPLITS)}")
     robot, _, count = body.partition(":")
     if not count:
-        return RandomExperiment(robot, default_obstacles, split)
+        return RandomExperiment(robot, default_obstacles, split, suite)
     if not count.isdigit():
         raise ValueError(f"'{experiment}': the obstacle count after ':' must be a whole number, "
                          "e.g. random-ur5:2@test")
-    return RandomExperiment(robot, int(count), split)
+    return RandomExperiment(robot, int(count), split, suite)
 
 
 @dataclass(frozen=True)
@@ -95,7 +106,7 @@ class EvaluationConfig:
         if self.runs < 1 or self.workers < 1:
             raise ValueError(f"runs and workers must be >= 1, got {self.runs} and {self.workers}")
         for experiment in self.experiments:  # here, not as 500 crash records from the workers
-            if experiment.startswith(RANDOM_PREFIX):
+            if is_drawn(experiment):
                 get_robot(parse_random(experiment, self.obstacles).robot)
 
 
@@ -103,7 +114,7 @@ def parse_experiments(text: str) -> tuple[str, ...]:
     """``1-7``, ``1,3``, ``exp4`` or ``random-ur5@test`` (mixed, comma-separated) to experiment names."""
     names: list[str] = []
     for part in (p.strip() for p in text.split(",") if p.strip()):
-        if part.startswith(RANDOM_PREFIX) or part.endswith(".json"):
+        if is_drawn(part) or part.endswith(".json"):
             names.append(part)
             continue
         bare = part.replace("exp", "")
@@ -122,7 +133,7 @@ def parse_experiments(text: str) -> tuple[str, ...]:
 def run_seed(experiment: str, run: int) -> int:
     """The seed of run ``run``, the same for every planner; a random experiment's run ``run``
     plays world ``run`` of its split."""
-    if not experiment.startswith(RANDOM_PREFIX):
+    if not is_drawn(experiment):
         return run
     return get_split(parse_random(experiment, EvaluationConfig.obstacles).split).seed(run)
 
@@ -161,9 +172,9 @@ class Worker:
         while len(self.executors) >= self.keep:  # before building: one world fewer at the peak
             self.executors.popitem(last=False)[1].close()
         exec_config = ExecutionConfig(replan=self.config.replan)
-        if experiment.startswith(RANDOM_PREFIX):
+        if is_drawn(experiment):
             suite = parse_random(experiment, self.config.obstacles)
-            ex = Executor("random", robot=suite.robot, config=exec_config)
+            ex = Executor(suite.suite, robot=suite.robot, config=exec_config)
             ex.env.set_n_obstacles(suite.obstacles)
         else:
             ex = Executor(experiment, config=exec_config)

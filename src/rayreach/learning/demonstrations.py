@@ -181,13 +181,14 @@ class CloneConfig:
     seed: int = 0
 
 
-def _world_env(robot: str, n_obstacles: int, kinds: tuple[str, ...], goal_tolerance: float):
-    """A random-world environment of ``kinds``: the paper's, for the expert and the DAgger rounds."""
+def _world_env(robot: str, n_obstacles: int, kinds: tuple[str, ...], goal_tolerance: float, observation):
+    """A random-world environment of ``kinds`` with the actor's observation: the paper's
+    environment, for the expert and the DAgger rounds."""
     from rayreach.env.reach import ReachEnv
     from rayreach.scenarios.random_world import RandomWorldConfig
 
     return ReachEnv(robot=robot, scenario="random", goal_tolerance=goal_tolerance,
-                    random_world=RandomWorldConfig(n_obstacles=n_obstacles, kinds=kinds))
+                    random_world=RandomWorldConfig(n_obstacles=n_obstacles, kinds=kinds), observation=observation)
 
 
 def _acting(env):
@@ -261,8 +262,9 @@ def clone_into_checkpoint(run: str | Path, kind: str, config: CloneConfig = Clon
     goal_size = float(meta["state"]["goal"]["size"])
     others = tuple(k for k in spec.training_kinds if k != kind)
     anchor_tolerance = goal_size if config.anchor_tolerance is None else config.anchor_tolerance
-    anchor_env = _acting(_world_env(robot, n_obstacles, others, anchor_tolerance))
-    expert_env = _world_env(robot, 1, (kind,), float(meta["config"]["goal"]["rho_min"]))  # the true task
+    anchor_env = _acting(_world_env(robot, n_obstacles, others, anchor_tolerance, actor.observation))
+    expert_env = _world_env(robot, 1, (kind,), float(meta["config"]["goal"]["rho_min"]),  # the true task
+                            actor.observation)
     acting_expert_env = _acting(expert_env)
     try:
         anchor_obs, _, anchor_before = _play(anchor_env, actor.act, lambda o, e: o, config.anchor_episodes,

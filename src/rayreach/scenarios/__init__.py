@@ -9,6 +9,10 @@ from rayreach.scenarios.schema import ObstacleSpec, Scenario, ScenarioError, Sta
 
 EXPERIMENTS = tuple(f"exp{i}" for i in range(1, 8))
 RANDOM = "random"
+BROAD = "broad"
+WORLD_SUITES = (RANDOM, BROAD)
+"""Names that stand for worlds drawn at each reset (``rayreach.scenarios.suites``): the
+training worlds, and broad worlds of tables, shelves, boxes, clutter and walls in the arm's reach."""
 
 
 def builtin_path(name: str) -> Path:
@@ -25,8 +29,8 @@ def get_scenario(name: str | Path | Scenario) -> Scenario:
     if text.endswith(".json") or Path(text).is_file():
         return load_scenario_file(text)
     raise ScenarioError(
-        f"unknown scenario '{text}'; known: {', '.join(EXPERIMENTS)}, '{RANDOM}', or a path to a .json scene file"
+        f"unknown scenario '{text}'; known: {', '.join(EXPERIMENTS)}, {', '.join(WORLD_SUITES)}, or a path to a .json scene file"
     )
 
 
-__all__ = ["EXPERIMENTS", "RANDOM", "ObstacleSpec", "Scenario", "ScenarioError", "StartSpec", "get_scenario"]
+__all__ = ["BROAD", "EXPERIMENTS", "RANDOM", "WORLD_SUITES", "ObstacleSpec", "Scenario", "ScenarioError", "StartSpec", "get_scenario"]

@@ -94,6 +94,21 @@ def shelf_boxes(
     return boxes, centres
 
 
+def drawn_scenario(name: str, robot: str, q_start: np.ndarray, goal: np.ndarray, obstacles: Sequence[ObstacleSpec],
+                   low: Sequence[float], high: Sequence[float], description: str) -> Scenario:
+    """A drawn world as a ``Scenario``: one goal, the start as joint angles."""
+    return Scenario(
+        name=name,
+        robot=robot,
+        start=StartSpec(joints=tuple(float(v) for v in q_start)),
+        goals=(tuple(float(v) for v in goal),),  # type: ignore[arg-type]
+        obstacles=tuple(obstacles),
+        workspace_low=tuple(float(v) for v in low),  # type: ignore[arg-type]
+        workspace_high=tuple(float(v) for v in high),  # type: ignore[arg-type]
+        description=description,
+    )
+
+
 class WorldChecker(Protocol):
     """Where a drawn world is checked: a ``Scene``, or one world of the batched env's
     ``CollisionWorlds`` (``WorldSlot``); both answer as PyBullet's contact query does."""
@@ -168,16 +183,8 @@ class RandomWorlds:
             clearance = self.config.start_clearance
             if clearance > 0 and self.scene.clearance(clearance) < clearance:
                 continue
-            scenario = Scenario(
-                name="random",
-                robot=spec.name,
-                start=StartSpec(joints=tuple(float(v) for v in q_start)),
-                goals=(tuple(float(v) for v in goal),),  # type: ignore[arg-type]
-                obstacles=tuple(obstacles),
-                workspace_low=tuple(spec.workspace_low),  # type: ignore[arg-type]
-                workspace_high=tuple(spec.workspace_high),  # type: ignore[arg-type]
-                description=f"random world with {n} obstacle(s)",
-            )
+            scenario = drawn_scenario("random", spec.name, q_start, goal, obstacles, spec.workspace_low,
+                                      spec.workspace_high, f"random world with {n} obstacle(s)")
             return scenario, q_start
         raise RuntimeError(
             f"no feasible random world for {spec.name} with {n} obstacle(s) in {self.config.max_tries} tries"
