@@ -12,7 +12,7 @@ $(STAMP): pyproject.toml
 	$(PY) -m pip install -q --upgrade pip
 	$(PY) -m pip install -q numpy
 	$(PY) -m pip install -q torch==2.13.0
-	$(PY) -m pip install -q -e ".[test,ompl]"
+	$(PY) -m pip install -q -e ".[test,ompl,onnx,ray]"
 	touch $(STAMP)
 
 demo: $(STAMP)

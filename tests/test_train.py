@@ -151,7 +151,8 @@ def test_exported_command_keeps_the_flags_a_resume_keeps():
     plain = train_command(base, "models/train-kr16")
     assert plain == ("rayreach train --recipe baseline --robot kr16 --timesteps 17100000 --envs 32 "
                      "--out models/train-kr16 --checkpoint-every 250000 [--resume]")  # an old run: the baseline's
-    assert "--recipe" not in train_command({**base, "vec_env": "batched", "envs": 256}, "RUN")
+    assert "--recipe" not in train_command({**base, "recipe": "default", "envs": 256}, "RUN")
+    assert train_command({**base, "recipe": "paper"}, "RUN").startswith("rayreach train --recipe paper --robot kr16")
     fixed = {**base, "acting_layers": True, "obstacles": {"start": 1, "minimum": 1, "maximum": 1}}
     assert train_command(fixed, "RUN").endswith("--checkpoint-every 250000 --acting-layers --obstacles 1 [--resume]")
 

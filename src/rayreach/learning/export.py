@@ -14,8 +14,9 @@ def train_command(config: dict, out: str | Path) -> str:
     given to one part only (``--freeze-features``, ``--critic-warmup``) are not saved."""
     command = (f"rayreach train --robot {config['robot']} --timesteps {config['timesteps']} --envs {config['envs']} "
                f"--out {out} --checkpoint-every {config['checkpoint_every']}")
-    if config.get("vec_env", "workers") == "workers":  # a run before the batched env, or one asked for
-        command = command.replace(" --robot", " --recipe baseline --robot", 1)
+    name = config.get("recipe", "baseline")  # a run saved before recipes were named was the baseline
+    if name != "default":
+        command = command.replace(" --robot", f" --recipe {name} --robot", 1)
     if config.get("acting_layers"):
         command += " --acting-layers"
     obstacles = config.get("obstacles", {})

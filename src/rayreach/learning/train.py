@@ -58,6 +58,8 @@ class TrainConfig:
     grows with each epoch but hardly depends on the minibatch from 2,048 up, so four
     minibatches cost no more than one."""
 
+    recipe: str = "default"
+    """The ``RECIPES`` entry the run started from (its ``--recipe``)."""
     robot: str = "ur5"
     timesteps: int = 40_000_000
     """Environment steps of the whole run: about 2 h of the default recipe on two cores."""
@@ -161,9 +163,9 @@ code used), over 32 worlds x 256 steps: 8,192 samples per update."""
 
 RECIPES: dict[str, TrainConfig] = {
     "default": TrainConfig(),
-    "baseline": TrainConfig(envs=32, vec_env="workers", observation=ObservationConfig(), timesteps=20_000_000,
+    "baseline": TrainConfig(recipe="baseline", envs=32, vec_env="workers", observation=ObservationConfig(), timesteps=20_000_000,
                             **PAPER_PPO),
-    "paper": TrainConfig(envs=32, timesteps=20_000_000, observation=ObservationConfig(), normalize=False, progress_weight=0.0,
+    "paper": TrainConfig(recipe="paper", envs=32, timesteps=20_000_000, observation=ObservationConfig(), normalize=False, progress_weight=0.0,
                          proximity_weight=0.0, true_goal_share=0.0, target_kl=None, **PAPER_PPO),
 }
 """Named starting points of a run. "default": the planner's observation on batched worlds
