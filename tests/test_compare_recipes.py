@@ -24,6 +24,24 @@ def test_the_fixed_task_keeps_goal_and_obstacles_whatever_the_outcomes(name):
     assert (config.envs, config.batch_size) == (recipe(name).envs, recipe(name).batch_size)
 
 
+def test_variants_change_one_thing_of_their_recipe():
+    from dataclasses import fields
+
+    from rayreach.cli import COMPARE_VARIANTS
+    from rayreach.evaluate.compare_recipes import VARIANTS, variant
+
+    assert COMPARE_VARIANTS == tuple(VARIANTS)  # the CLI names them without importing torch
+    default = recipe("default", robot="kr16")
+    for name in ("paper-observation", "no-scans", "no-workspace", "entropy"):
+        changed = [f.name for f in fields(default) if getattr(variant(name, "kr16"), f.name) != getattr(default, f.name)]
+        assert len(changed) == 1, (name, changed)
+    assert variant("no-scans", "ur5").observation.scans == 0 and variant("paper-observation", "ur5").observation.is_paper
+    task = fixed_task(variant("entropy", "ur5"), goal=0.01, obstacles=2)
+    assert (task.goal.rho, task.obstacles.start, task.ent_coef) == (0.01, 2, 0.005)
+    with pytest.raises(ValueError, match="paper-observation"):
+        variant("bigger", "ur5")
+
+
 def test_the_wall_clock_stops_learning():
     from stable_baselines3 import PPO
 

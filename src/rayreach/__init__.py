@@ -9,6 +9,8 @@ Importing the package registers the Gymnasium environments listed in ``ENV_IDS``
     envs = gym.make_vec("rayreach/Reach-UR5-v0", num_envs=256, vectorization_mode="vector_entry_point")
 
 ``make_vec`` with ``vector_entry_point`` steps all worlds as one batch (``rayreach.env.vector``).
+
+``rayreach.plan(scene, planner)`` plans and executes one query in simulation (``rayreach.api``).
 """
 
 from __future__ import annotations
@@ -26,4 +28,6 @@ for _robot in ("UR5", "KR16"):
                  vector_entry_point="rayreach.env.vector:ReachVectorEnv", kwargs={"robot": _robot.lower()})
     ENV_IDS.append(_id)
 
-__all__ = ["ENV_IDS", "__version__"]
+from rayreach.api import STATUSES, PlanOutcome, plan  # noqa: E402  (numpy only; the simulator loads on a call)
+
+__all__ = ["ENV_IDS", "STATUSES", "PlanOutcome", "__version__", "plan"]

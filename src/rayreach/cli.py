@@ -5,11 +5,14 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from pathlib import Path
 from typing import Sequence
 
 
 EVAL_PLANNERS = "drl,rrt,ncrrt,ompl-rrt,ompl-rrtconnect"
 TRAIN_RECIPES = ("default", "baseline", "paper")
+COMPARE_VARIANTS = ("baseline", "default", "paper", "paper-observation", "no-scans", "no-workspace", "entropy")
+"""``rayreach.evaluate.compare_recipes.VARIANTS``' names."""
 """``rayreach.learning.train.RECIPES``' names (that module imports torch's stack)."""
 
 LAYER_HELP = {"final_approach": "straight final approach near the goal", "ray_shield": "ray shield and its hit memory",
@@ -25,6 +28,16 @@ def _scenario_arg(parser: argparse.ArgumentParser) -> None:
         "scenario_pos", nargs="?", metavar="SCENARIO", help="exp1..exp7 or a scene .json file"
     )
     parser.add_argument("--scenario", dest="scenario_opt", help="same as the positional SCENARIO")
+
+
+MODEL_HELP = "ur5 or kr16 (that robot's shipped policy), or a model or checkpoint .zip"
+
+
+def _model(name_or_path: str):
+    """The policy file an option names (``rayreach.planners.drl.resolve_model``)."""
+    from rayreach.planners.drl import resolve_model
+
+    return resolve_model(name_or_path)
 
 
 def _pick_scenario(args: argparse.Namespace, parser: argparse.ArgumentParser) -> str:
@@ -50,7 +63,7 @@ def build_parser() -> argparse.ArgumentParser:
     show.add_argument("--gui", action="store_true", help="open PyBullet's GUI instead (needs a display)")
     show.add_argument("--seed", type=int, default=0)
     show.add_argument("--planner", default=None, help="run this planner (drl, rrt, ncrrt, ...) and draw its path")
-    show.add_argument("--model", default=None, help="DRL policy (default: the shipped one for the robot)")
+    show.add_argument("--model", default=None, help=f"DRL policy: {MODEL_HELP} (default: the robot's shipped one)")
     show.add_argument("--video", default=None, help="also write the run as a GIF, e.g. exp4.gif")
 
     bench = sub.add_parser("bench-env", help="environment steps per second for both ray backends")
@@ -64,7 +77,7 @@ def build_parser() -> argparse.ArgumentParser:
                        help="compare the single env with the batched env of N worlds instead of the ray backends")
 
     bact = sub.add_parser("bench-acting", help="microseconds per step of the acting stack, minus each layer, and alone")
-    bact.add_argument("--model", required=True, help="a model or checkpoint .zip")
+    bact.add_argument("--model", required=True, help=MODEL_HELP)
     bact.add_argument("--episodes", type=int, default=10, help="random worlds, each run by every variant in turn")
     bact.add_argument("--obstacles", type=int, default=None, help="obstacles per world (default: training's)")
     bact.add_argument("--split", choices=EVALUATION_SPLITS, default="validation")
@@ -103,9 +116,13 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--run-timeout", type=float, default=180.0, help="a run taking longer is stored as a crash, s")
     ev.add_argument("--smooth", action="store_true", help="shortcut-smooth the sampling planners' paths")
     ev.add_argument("--replan", action="store_true", help="sampling planners replan when the path becomes invalid")
-    ev.add_argument("--model-ur5", default=None, help="DRL policy for the UR5 (default: models/ur5.zip)")
-    ev.add_argument("--model-kr16", default=None, help="DRL policy for the KR16 (default: models/kr16.zip)")
+    ev.add_argument("--model-ur5", default=None, help=f"DRL policy for the UR5: {MODEL_HELP} (default: ur5)")
+    ev.add_argument("--model-kr16", default=None, help=f"DRL policy for the KR16: {MODEL_HELP} (default: kr16)")
     ev.add_argument("--report-only", action="store_true", help="only rewrite table, CSV and plots from results.db")
+    ev.add_argument("--ray", nargs="?", const="local", default=None, metavar="ADDRESS",
+                    help="run the runs as Ray actors: alone, on a local Ray of --workers CPUs; with ADDRESS "
+                         "(auto, ray://host:10001), on that cluster, --workers actors (default: its CPUs); "
+                         "needs pip install rayreach[ray]")
 
     train = sub.add_parser("train", help="train a PPO policy on random worlds (resumable)")
     train.add_argument("--robot", required=True, help="ur5 or kr16")
@@ -151,6 +168,21 @@ def build_parser() -> argparse.ArgumentParser:
                        help="share of episodes at the true goal size while the goal is enlarged (default 0.5; "
                             "also changes a resumed run)")
 
+    sweep = sub.add_parser("sweep", help="train one run per seed (or per value of a setting), each in its own "
+                                         "directory, resumable; on Ray with --ray")
+    sweep.add_argument("--robot", required=True, help="ur5 or kr16")
+    sweep.add_argument("--seeds", default="0", help="e.g. 0,1,2 or 0-4: one trial per seed")
+    sweep.add_argument("--set", dest="setting", default=None, metavar="FIELD=V1,V2",
+                       help="also one trial per value of this TrainConfig field (e.g. learning_rate=3e-4,1e-3)")
+    sweep.add_argument("--recipe", choices=TRAIN_RECIPES, default="default")
+    sweep.add_argument("--timesteps", type=int, default=None, help="steps per trial (default: the recipe's)")
+    sweep.add_argument("--checkpoint-every", type=int, default=100_000, help="steps between checkpoints")
+    sweep.add_argument("--out", required=True, help="sweep directory: trial NAME trains into OUT/NAME")
+    sweep.add_argument("--ray", nargs="?", const="local", default=None, metavar="ADDRESS",
+                       help="each trial a Ray task: alone, on a local Ray; with ADDRESS (auto, ray://host:10001), "
+                            "on that cluster (OUT must be seen by every node); needs pip install rayreach[ray]")
+    sweep.add_argument("--cpus", type=int, default=2, help="CPUs per trial with --ray (its workers)")
+
     btrain = sub.add_parser("bench-train", help="training samples per second: the baseline recipe, then the default")
     btrain.add_argument("--robot", default="ur5", help="ur5 or kr16")
     btrain.add_argument("--seconds", type=float, default=120.0, help="timed seconds per recipe, after a warm-up")
@@ -162,9 +194,17 @@ def build_parser() -> argparse.ArgumentParser:
     cmp_.add_argument("--minutes", type=float, default=15.0, help="wall time per recipe")
     cmp_.add_argument("--episodes", type=int, default=200, help="validation worlds each final policy runs")
     cmp_.add_argument("--out", required=True, help="directory of the runs, curves.png and summary.json (resumable)")
+    cmp_.add_argument("--variants", default="baseline,default",
+                      help=f"comma-separated, of: {', '.join(COMPARE_VARIANTS)} (a recipe, or the default with "
+                           "one change: the paper's observation, no remembered scans, no workspace walls, an "
+                           "entropy bonus of 0.005)")
+    cmp_.add_argument("--goal", type=float, default=0.1, help="the task's goal radius, m")
+    cmp_.add_argument("--obstacles", type=int, default=1, help="the task's obstacles per world")
+    cmp_.add_argument("--jobs", type=int, default=1,
+                      help="variants trained at once, each on its share of the cores (default: one after another)")
 
     roll = sub.add_parser("rollout", help="run a saved policy and report success, collisions, path length")
-    roll.add_argument("--model", required=True, help="a model or checkpoint .zip")
+    roll.add_argument("--model", required=True, help=MODEL_HELP)
     _scenario_arg(roll)
     roll.add_argument("--episodes", type=int, default=10)
     roll.add_argument("--stochastic", action="store_true", help="sample actions instead of the mean")
@@ -208,9 +248,15 @@ def build_parser() -> argparse.ArgumentParser:
                       help="seed of the first random world, within --split (default: the split's first)")
     roll.add_argument("--json", action="store_true", help="print one JSON line")
 
-    export = sub.add_parser("export", help="copy a run's model (or latest checkpoint) to a shipped file + JSON")
-    export.add_argument("--run", required=True, help="run directory or bundle .zip")
-    export.add_argument("--to", required=True, help="target .zip, e.g. models/ur5.zip")
+    export = sub.add_parser("export", help="copy a run's model (or latest checkpoint) to a shipped file + "
+                                           "JSON, or write it as one ONNX graph")
+    export_source = export.add_mutually_exclusive_group(required=True)
+    export_source.add_argument("--run", help="run directory or bundle .zip")
+    export_source.add_argument("--model", help="a bundle .zip, or a robot name for its shipped policy "
+                                                "(models/ROBOT.zip)")
+    export.add_argument("--to", help="target .zip, e.g. models/ur5.zip")
+    export.add_argument("--onnx", help="target .onnx: the deterministic action, the observation's "
+                                       "normalisation folded in")
 
     clone = sub.add_parser("clone", help="fit a run's checkpoint to a scripted expert's demonstrations")
     clone.add_argument("--run", required=True, help="run directory holding checkpoint.zip")
@@ -224,6 +270,9 @@ def build_parser() -> argparse.ArgumentParser:
                        help="goal tolerance of those episodes, m (default: the run's curriculum goal size)")
     clone.add_argument("--eval-episodes", type=int, default=CloneConfig.eval_episodes,
                        help="expert-world episodes that measure the actor before and after")
+
+    robots = sub.add_parser("robots", help="the robots: URDF package, joints, shipped policy, Gymnasium id")
+    robots.add_argument("--json", action="store_true", help="print one JSON list")
 
     demo = sub.add_parser("demo", help="a scripted episode on exp1, drawn to a PNG")
     demo.add_argument("--scenario", default="exp1")
@@ -249,17 +298,31 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _bench_acting(args)
         if args.command == "demo":
             return _demo(args)
+        if args.command == "robots":
+            return _robots(args)
         if args.command == "train":
             return _train(args, argv)
         if args.command == "bench-train":
             return _bench_train(args)
+        if args.command == "sweep":
+            return _sweep(args, argv)
         if args.command == "compare-recipes":
             return _compare_recipes(args)
         if args.command == "export":
             from rayreach.learning.export import export_bundle
 
-            for path in export_bundle(args.run, args.to):
-                print(f"wrote {path}")
+            if not (args.to or args.onnx):
+                parser.error("export: give --to (a bundle copy) and/or --onnx (an ONNX graph)")
+            source = _model(args.model) if args.model else args.run
+            if args.to:
+                written = export_bundle(source, args.to)
+                for path in written:
+                    print(f"wrote {path}")
+                source = written[0]  # the ONNX graph is then the copy's, whatever a run writes meanwhile
+            if args.onnx:
+                from rayreach.learning.onnx_export import export_onnx
+
+                print(f"wrote {export_onnx(source, args.onnx)}")
             return 0
         if args.command == "rollout":
             return _rollout(args, _pick_scenario(args, parser))
@@ -301,7 +364,7 @@ def _show(args: argparse.Namespace, scenario: str) -> int:
     from rayreach.evaluate.render import write_video
 
     with Executor(scenario) as ex:
-        planner = make_planner(args.planner, ex.robot, model=args.model)
+        planner = make_planner(args.planner, ex.robot, model=_model(args.model) if args.model else None)
         record = ex.run(planner, args.seed)
         print(f"{args.planner} on {scenario}: {record.outcome}, path {record.path_length:.3f} m, "
               f"planning {record.planning_time:.3f} s, motion {record.motion_time:.2f} s")
@@ -375,14 +438,19 @@ def _evaluate(args: argparse.Namespace) -> int:
             if value is not None:
                 raise ValueError(f"{option} applies to --suite random or broad (the experiments' scenes are fixed)")
         experiments = parse_experiments(args.experiments)
-    models = tuple((robot, path) for robot, path in (("ur5", args.model_ur5), ("kr16", args.model_kr16)) if path)
+    models = tuple((robot, str(_model(path))) for robot, path in (("ur5", args.model_ur5), ("kr16", args.model_kr16))
+                   if path)
     config = EvaluationConfig(experiments, planners, runs=runs, time_limit=args.time_limit,
                               run_timeout=args.run_timeout, smooth=args.smooth, replan=args.replan, models=models)
     if args.workers is not None:
         from dataclasses import replace
 
         config = replace(config, workers=args.workers)
-    if not args.report_only:
+    if not args.report_only and args.ray is not None:
+        from rayreach.evaluate.ray_runner import evaluate_on_ray
+
+        evaluate_on_ray(config, args.out, address=None if args.ray == "local" else args.ray, actors=args.workers)
+    elif not args.report_only:
         evaluate(config, args.out)
     written = write_report(args.out)
     if args.suite:
@@ -405,7 +473,7 @@ def _evaluate(args: argparse.Namespace) -> int:
 def _bench_acting(args: argparse.Namespace) -> int:
     from rayreach.evaluate.bench_acting import bench_acting
 
-    record = bench_acting(args.model, args.episodes, args.obstacles, args.split, progress=not args.json)
+    record = bench_acting(_model(args.model), args.episodes, args.obstacles, args.split, progress=not args.json)
     if args.json:
         print(json.dumps(record))
         return 0
@@ -485,6 +553,35 @@ def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
     return 0
 
 
+def _sweep(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
+    from dataclasses import replace
+
+    from rayreach.learning.sweep import parse_seeds, parse_setting, plan_trials, sweep
+    from rayreach.learning.train import recipe
+    from rayreach.robots import get_robot
+
+    config = recipe(args.recipe, robot=get_robot(args.robot).name, checkpoint_every=args.checkpoint_every)
+    if args.timesteps is not None:
+        config = replace(config, timesteps=args.timesteps)
+    setting = parse_setting(args.setting, config) if args.setting else None
+    trials = plan_trials(config, args.out, parse_seeds(args.seeds), setting)
+    for trial in trials:
+        print(f"{trial.name}: {trial.out}")
+
+    def report(result) -> None:
+        outcome = result.error or f"model {result.model} ({result.seconds:.0f} s)"
+        print(f"{result.trial.name} ({result.state}): {outcome}", flush=True)
+
+    command = "rayreach " + " ".join(sys.argv[1:] if argv is None else argv)
+    results = sweep(trials, ray_address=args.ray, use_ray=args.ray is not None, cpus=args.cpus,
+                    command=command, report=report)
+    failed = [r.trial.name for r in results if r.error]
+    if failed:
+        print(f"rayreach sweep: {len(failed)} of {len(results)} trials failed: {', '.join(failed)}", file=sys.stderr)
+        return 1
+    return 0
+
+
 def _bench_train(args: argparse.Namespace) -> int:
     from rayreach.evaluate.bench_train import bench_train
     from rayreach.robots import get_robot
@@ -507,10 +604,12 @@ def _compare_recipes(args: argparse.Namespace) -> int:
     from rayreach.evaluate.compare_recipes import compare_recipes
     from rayreach.robots import get_robot
 
-    summary = compare_recipes(get_robot(args.robot).name, args.minutes, args.out, episodes=args.episodes)
+    variants = tuple(v.strip() for v in args.variants.split(",") if v.strip())
+    summary = compare_recipes(get_robot(args.robot).name, args.minutes, args.out, episodes=args.episodes,
+                              variants=variants, goal=args.goal, obstacles=args.obstacles, jobs=args.jobs)
     for name, data in summary["recipes"].items():
         v = data["validation"]
-        print(f"{name:>9}: {data['timesteps']:>10,} steps in {data['wall_time_s']:.0f} s; validation "
+        print(f"{name:>17}: {data['timesteps']:>10,} steps in {data['wall_time_s']:.0f} s; validation "
               f"success {v['success_rate']:.1%}, collisions {v['collision_rate']:.1%}")
     print(f"wrote {args.out}/curves.png and summary.json")
     return 0
@@ -536,7 +635,7 @@ def _rollout(args: argparse.Namespace, scenario: str) -> int:
     from rayreach.evaluate.rollout import rollout
 
     acting = acting_from_args(args)
-    summary = rollout(args.model, scenario, episodes=args.episodes, deterministic=not args.stochastic,
+    summary = rollout(_model(args.model), scenario, episodes=args.episodes, deterministic=not args.stochastic,
                       goal_tolerance=args.tolerance, n_obstacles=args.obstacles, progress=not args.json,
                       acting=acting, start_clearance=args.start_clearance, seed=args.seed, split=args.split)
     if args.json:
@@ -568,6 +667,44 @@ def _clone(args: argparse.Namespace) -> int:
           f"collisions {before['collision']:.0%} -> {after['collision']:.0%}; "
           f"other worlds: success {report['other_worlds']['before']['success']:.0%} -> "
           f"{report['other_worlds']['after']['success']:.0%} ({report['wall_time_s']:.0f} s)")
+    return 0
+
+
+def _source_package(urdf: Path) -> str | None:
+    """The installed distribution whose files hold ``urdf``: the robot's source as pip names
+    it, read from the installation rather than restated beside each spec."""
+    from importlib import metadata
+
+    target = Path(urdf).resolve()
+    for dist in metadata.distributions():
+        for file in dist.files or ():
+            if file.name == target.name and Path(str(dist.locate_file(file))).resolve() == target:
+                return dist.metadata["Name"]
+    return None
+
+
+def _robots(args: argparse.Namespace) -> int:
+    from rayreach import ENV_IDS
+    from rayreach.planners.drl import MODELS_DIR, shipped_robots
+    from rayreach.robots import ROBOTS
+
+    shipped = shipped_robots()
+    rows = []
+    for name, spec in ROBOTS.items():
+        try:
+            package = _source_package(spec.urdf())
+        except FileNotFoundError as exc:  # the URDF's package is not installed
+            package = f"missing: {exc}"
+        env_id = next((i for i in ENV_IDS if i.lower() == f"rayreach/reach-{name}-v0"), None)
+        rows.append({"name": name, "package": package, "dof": spec.n_joints, "shipped_policy": name in shipped,
+                     "policy": str(MODELS_DIR / f"{name}.zip") if name in shipped else None, "env_id": env_id})
+    if args.json:
+        print(json.dumps(rows))
+        return 0
+    print(f"{'robot':<8} {'URDF package':<20} {'dof':>3}  {'shipped policy':<14}  Gymnasium id")
+    for r in rows:
+        print(f"{r['name']:<8} {r['package'] or '?':<20} {r['dof']:>3}  {'yes' if r['shipped_policy'] else 'no':<14}  "
+              f"{r['env_id'] or '-'}")
     return 0
 
 

@@ -1,12 +1,15 @@
-"""Training recipes compared on one fixed task at equal wall time.
+"""Training recipes, and one departure at a time from them, compared on one fixed task at
+equal wall time.
 
-``rayreach compare-recipes --robot ur5 --minutes 15 --out runs/compare`` trains each recipe in
-``COMPARED`` (both of ``rayreach.learning.train.RECIPES``) from scratch on the same task
-(random worlds of one obstacle, a 0.1 m goal, both curricula held), for the same wall time
-one after the other, then runs each final policy alone, deterministically, on validation
-worlds of that task. It writes ``curves.png`` (success over wall time, both recipes) and
-``summary.json``. A run that was stopped resumes where it stood: finished recipes are kept,
-an interrupted one continues from its checkpoint with the wall time it has left.
+``rayreach compare-recipes --robot ur5 --minutes 15 --out runs/compare`` trains each variant
+(``VARIANTS``; by default ``COMPARED``, the baseline and default recipes) from scratch on the
+same task (random worlds of ``--obstacles``, a ``--goal`` radius, both curricula held), for
+the same wall time, then runs each final policy alone, deterministically, on validation
+worlds of that task. ``--jobs N`` trains N variants at once, each on its share of the cores,
+so that whatever else loads the machine loads them alike. It writes ``curves.png`` (success
+over wall time and over samples) and ``summary.json``. A run that was stopped resumes where
+it stood: finished variants are kept, an interrupted one continues from its checkpoint with
+the wall time it has left.
 """
 
 from __future__ import annotations
@@ -21,22 +24,40 @@ from typing import Any
 
 from stable_baselines3.common.callbacks import BaseCallback
 
+from rayreach.env.observation import ObservationConfig
 from rayreach.learning.bundles import read_bundle_meta
 from rayreach.learning.curriculum import GoalSizeParams, ObstacleParams
 from rayreach.learning.train import CHECKPOINT, CURVE, MODEL, RECIPES, TrainConfig, recipe, train
 
 GOAL = 0.1
-"""The task's goal radius, m."""
+"""The task's goal radius, m (default)."""
 OBSTACLES = 1
-"""The task's obstacles per world."""
+"""The task's obstacles per world (default)."""
 COMPARED = ("baseline", "default")
+VARIANTS: dict[str, tuple[str, dict[str, Any]]] = {
+    "baseline": ("baseline", {}),
+    "default": ("default", {}),
+    "paper": ("paper", {}),
+    "paper-observation": ("default", {"observation": ObservationConfig()}),
+    "no-scans": ("default", {"observation": replace(ObservationConfig.planner(), scans=0)}),
+    "no-workspace": ("default", {"observation": replace(ObservationConfig.planner(), workspace=False)}),
+    "entropy": ("default", {"ent_coef": 0.005}),
+}
+"""What can be compared: a recipe, or a recipe with one change (its ablation)."""
 
 
-def fixed_task(config: TrainConfig) -> TrainConfig:
+def variant(name: str, robot: str) -> TrainConfig:
+    if name not in VARIANTS:
+        raise ValueError(f"unknown variant {name!r}; choose from {', '.join(VARIANTS)}")
+    base, changes = VARIANTS[name]
+    return recipe(base, robot=robot, **changes)
+
+
+def fixed_task(config: TrainConfig, goal: float = GOAL, obstacles: int = OBSTACLES) -> TrainConfig:
     """``config`` on the fixed task: the goal-size and obstacle curricula held at their values."""
     return replace(config, timesteps=10**12, true_goal_share=0.0,
-                   goal=GoalSizeParams(rho=GOAL, rho_max=GOAL, rho_min=GOAL),
-                   obstacles=ObstacleParams(start=OBSTACLES, minimum=OBSTACLES, maximum=OBSTACLES))
+                   goal=GoalSizeParams(rho=goal, rho_max=goal, rho_min=goal),
+                   obstacles=ObstacleParams(start=obstacles, minimum=obstacles, maximum=obstacles))
 
 
 class WallClock(BaseCallback):
@@ -70,21 +91,43 @@ def curve(path: Path) -> dict[str, list[float]]:
             for key in ("wall_time", "timesteps", "success_rate", "collision_rate")}
 
 
+def _train_job(job: tuple[TrainConfig, float, Path]) -> Path:
+    config, seconds, out = job
+    return train_for(config, seconds, out)
+
+
 def compare_recipes(robot: str, minutes: float, out: str | Path, episodes: int = 200,
-                    progress: bool = True) -> dict[str, Any]:
-    """Train every recipe in ``COMPARED`` for ``minutes`` on the fixed task, check each on
-    ``episodes`` validation worlds; the summary, with the plot written beside it."""
+                    progress: bool = True, variants: tuple[str, ...] = COMPARED, goal: float = GOAL,
+                    obstacles: int = OBSTACLES, jobs: int = 1) -> dict[str, Any]:
+    """Train every one of ``variants`` for ``minutes`` on the fixed task, ``jobs`` at a time,
+    check each on ``episodes`` validation worlds; the summary, with the plot written beside it."""
+    import multiprocessing as mp
+
     from rayreach.acting import ActingConfig
     from rayreach.evaluate.rollout import rollout
 
     if minutes <= 0:
         raise ValueError(f"minutes must be positive, got {minutes}")
+    if jobs < 1:
+        raise ValueError(f"jobs must be >= 1, got {jobs}")
     out = Path(out)
-    summary: dict[str, Any] = {"robot": robot, "minutes": minutes, "goal_m": GOAL, "obstacles": OBSTACLES,
-                               "episodes": episodes, "split": "validation", "cores": os.cpu_count(), "recipes": {}}
-    for name in COMPARED:
-        model = train_for(fixed_task(recipe(name, robot=robot)), minutes * 60.0, out / name)
-        checked = rollout(str(model), "random", episodes=episodes, goal_tolerance=GOAL, n_obstacles=OBSTACLES,
+    cores = os.cpu_count() or 1
+    share = max(1, cores // min(jobs, len(variants)))
+    configs = {name: fixed_task(variant(name, robot), goal, obstacles) for name in variants}
+    if jobs > 1:
+        configs = {name: replace(c, workers=share) for name, c in configs.items()}
+    work = [(configs[name], minutes * 60.0, out / name) for name in variants]
+    if jobs > 1:
+        with mp.get_context("spawn").Pool(min(jobs, len(work))) as pool:
+            models = dict(zip(variants, pool.map(_train_job, work, chunksize=1)))
+    else:
+        models = {name: _train_job(job) for name, job in zip(variants, work)}
+    summary: dict[str, Any] = {"robot": robot, "minutes": minutes, "goal_m": goal, "obstacles": obstacles,
+                               "episodes": episodes, "split": "validation", "cores": cores, "jobs": jobs,
+                               "recipes": {}}
+    for name in variants:
+        model = models[name]
+        checked = rollout(str(model), "random", episodes=episodes, goal_tolerance=goal, n_obstacles=obstacles,
                           acting=ActingConfig.off(), split="validation", progress=progress)
         meta, _ = read_bundle_meta(model)
         summary["recipes"][name] = {"timesteps": meta["timesteps"], "wall_time_s": meta["wall_time_s"],
@@ -104,19 +147,21 @@ def plot_curves(summary: dict[str, Any], path: Path) -> Path:
     import matplotlib.pyplot as plt
 
     fig, (by_time, by_samples) = plt.subplots(1, 2, figsize=(11, 4), sharey=True)
-    for (name, data), color in zip(summary["recipes"].items(), ("#7f7f7f", "#1f5fd6")):
+    colors = ("#7f7f7f", "#1f5fd6", "#d62728", "#2b9a3e", "#ff7f0e", "#9467bd", "#8c564b")
+    for (name, data), color in zip(summary["recipes"].items(), colors):
         c, final = data["curve"], data["validation"]["success_rate"]
         label = f"{name}: validation {final:.0%} alone"
         by_time.plot([t / 60 for t in c["wall_time"]], c["success_rate"], color=color, label=label)
         by_samples.plot([s / 1e6 for s in c["timesteps"]], c["success_rate"], color=color, label=label)
-    by_time.set_xlabel(f"wall time (min, {summary['cores']} cores)")
+    jobs = summary.get("jobs", 1)
+    by_time.set_xlabel(f"wall time (min, {summary['cores']} cores" + (f", {jobs} runs at once)" if jobs > 1 else ")"))
     by_samples.set_xlabel("environment steps (millions)")
     by_time.set_ylabel("training success, last 200 episodes")
     for ax in (by_time, by_samples):
         ax.grid(alpha=0.3)
         ax.set_ylim(-0.02, 1.02)
     by_time.legend(loc="lower right", fontsize=8)
-    fig.suptitle(f"{summary['robot'].upper()}: recipes on one fixed task ({summary['obstacles']} obstacle, "
+    fig.suptitle(f"{summary['robot'].upper()}: one fixed task ({summary['obstacles']} obstacle(s), "
                  f"{summary['goal_m']} m goal), {summary['minutes']:g} min each")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
@@ -124,4 +169,4 @@ def plot_curves(summary: dict[str, Any], path: Path) -> Path:
     return path
 
 
-__all__ = ["COMPARED", "RECIPES", "compare_recipes", "fixed_task"]
+__all__ = ["COMPARED", "RECIPES", "VARIANTS", "compare_recipes", "fixed_task", "variant"]

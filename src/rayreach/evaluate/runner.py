@@ -10,7 +10,7 @@ from collections import OrderedDict
 from dataclasses import dataclass, field
 from importlib import metadata
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any, Callable, Iterator
 
 from tqdm import tqdm
 
@@ -244,8 +244,18 @@ def pending_jobs(config: EvaluationConfig, done: set[tuple[str, str, int]]) -> l
             if (e, p, r) not in done]
 
 
-def evaluate(config: EvaluationConfig, out: str | Path, progress: bool = True) -> Path:
-    """Run what ``out/results.db`` does not hold yet; returns the database path."""
+Job = tuple[str, str, int]
+"""(experiment, planner, run)."""
+Backend = Callable[[EvaluationConfig, list[Job]], Iterator[tuple[Job, str, RunRecord]]]
+"""What runs the pending jobs: yields (job, robot, record) as each finishes, in any order."""
+
+
+def evaluate(config: EvaluationConfig, out: str | Path, progress: bool = True,
+             backend: Backend | None = None) -> Path:
+    """Run what ``out/results.db`` does not hold yet; returns the database path.
+
+    ``backend``: what runs the jobs (default: the process pool; ``ray_runner`` passes Ray's),
+    so every backend stores the same rows and resumes from the same store."""
     from rayreach.learning.train import git_commit
 
     out = Path(out)
@@ -254,7 +264,7 @@ def evaluate(config: EvaluationConfig, out: str | Path, progress: bool = True) -
     meta = versions(), git_commit()
     bar = tqdm(total=len(jobs), desc="evaluate", unit="run", disable=not progress)
     try:
-        for (experiment, planner, run), robot, record in _results(config, jobs):
+        for (experiment, planner, run), robot, record in (backend or _results)(config, jobs):
             store.add(experiment, robot, ExecutionConfig().goal_tolerance, run, record, *meta)
             bar.set_postfix_str(f"{experiment} {planner} #{run}: {record.outcome}")
             bar.update()

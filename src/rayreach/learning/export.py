@@ -25,18 +25,23 @@ def train_command(config: dict, out: str | Path) -> str:
     return command + " [--resume]"
 
 
+def run_bundle(source: str | Path) -> Path:
+    """A bundle file as it is, or a run directory's newer of model.zip and checkpoint.zip."""
+    source = Path(source)
+    if source.is_dir():
+        found = [c for c in (source / "model.zip", source / "checkpoint.zip") if c.exists()]
+        if not found:
+            raise CheckpointError(f"{source} holds neither model.zip nor checkpoint.zip")
+        return max(found, key=lambda c: read_bundle_meta(c)[0]["timesteps"])
+    return source
+
+
 def export_bundle(source: str | Path, target: str | Path) -> tuple[Path, Path]:
     """Copy a run's model (or its latest checkpoint) to ``target`` and write the metadata
     beside it as ``target`` with a .json suffix: what a shipped policy carries."""
     import shutil
 
-    source, target = Path(source), Path(target)
-    if source.is_dir():
-        candidates = [source / "model.zip", source / "checkpoint.zip"]
-        found = [c for c in candidates if c.exists()]
-        if not found:
-            raise CheckpointError(f"{source} holds neither model.zip nor checkpoint.zip")
-        source = max(found, key=lambda c: read_bundle_meta(c)[0]["timesteps"])
+    source, target = run_bundle(source), Path(target)
     meta, _ = read_bundle_meta(source)
     target.parent.mkdir(parents=True, exist_ok=True)
     shutil.copyfile(source, target)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from importlib import resources
 from pathlib import Path
 from typing import Any
 
@@ -12,20 +13,48 @@ from rayreach.acting.resample import ActingPolicy
 from rayreach.learning.policy import load_policy
 from rayreach.planners.base import ReactivePlanner
 
-MODELS_DIR = Path(__file__).resolve().parents[3] / "models"
-"""The repository's shipped policies (``models/ur5.zip``, ``models/kr16.zip``)."""
+MODELS_DIR = Path(str(resources.files("rayreach.models")))
+"""The shipped policies (``<robot>.zip`` with ``<robot>.json`` beside it): package data of
+``rayreach.models``, so an installed wheel has them; in a checkout, the repository's ``models/``."""
 
 
 def shipped_model(robot: str) -> Path:
-    """The shipped policy for ``robot``: ``models/<robot>.zip`` in the working directory or
-    in the repository; the error names both places."""
-    for folder in (Path("models"), MODELS_DIR):
-        candidate = folder / f"{robot}.zip"
-        if candidate.is_file():
-            return candidate
+    """The shipped policy for ``robot``; the error names the robots that have one."""
+    candidate = MODELS_DIR / f"{robot}.zip"
+    if candidate.is_file():
+        return candidate
     raise FileNotFoundError(
-        f"no shipped policy for '{robot}': looked for models/{robot}.zip and {MODELS_DIR / (robot + '.zip')}; "
-        "pass a model with --model (a checkpoint.zip or an exported bundle)"
+        f"no shipped policy for '{robot}'; shipped: {', '.join(shipped_robots()) or 'none'}; "
+        "pass a model path instead (a checkpoint.zip or an exported bundle)"
+    )
+
+
+def shipped_robots() -> tuple[str, ...]:
+    """The robots with a shipped policy, in ``rayreach.robots.ROBOTS`` order."""
+    from rayreach.robots import ROBOTS
+
+    return tuple(name for name in ROBOTS if (MODELS_DIR / f"{name}.zip").is_file())
+
+
+def resolve_model(name_or_path: str | Path) -> Path:
+    """A policy given as a robot name (``ur5``: its shipped policy) or as a file path.
+
+    Every option that takes a policy goes through here, so a name works wherever a path
+    does. An existing file wins over a name; a missing path (``.zip`` or with a folder) is
+    returned as it is, for the loader to name the missing file."""
+    path = Path(name_or_path)
+    if path.is_file():
+        return path
+    from rayreach.robots import ROBOTS
+
+    name = str(name_or_path).lower()
+    if name in ROBOTS:
+        return shipped_model(name)
+    if path.suffix == ".zip" or len(path.parts) > 1:
+        return path
+    raise FileNotFoundError(
+        f"no shipped policy for '{name_or_path}' and no such file; robots with a shipped policy: "
+        f"{', '.join(shipped_robots())}; or give a path to a model .zip"
     )
 
 
@@ -35,7 +64,7 @@ class DRLPlanner(ReactivePlanner):
 
     def __init__(self, model: str | Path, deterministic: bool = True, acting: ActingConfig = ActingConfig(),
                  name: str = "drl") -> None:
-        self.policy = load_policy(model)
+        self.policy = load_policy(resolve_model(model))
         self.deterministic = deterministic
         self.acting = acting
         self.name = name
