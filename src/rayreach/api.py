@@ -31,12 +31,14 @@ import numpy as np
 from rayreach.scenarios import WORLD_SUITES, Scenario, get_scenario
 from rayreach.scenarios.schema import scenario_from_dict
 
-STATUSES = ("success", "collision", "timeout", "out of bounds", "no plan")
+STATUSES = ("success", "collision", "timeout", "out of bounds", "no plan", "outside training")
 """What a query can end in, as the executor records it (``RunRecord.outcome``): ``success``
 (every goal reached within the tolerance, no contact); ``collision`` (the arm touched an
 obstacle); ``timeout`` (a DRL planner used up its step budget); ``out of bounds`` (a DRL
 planner left the workspace); ``no plan`` (a sampling planner found no path, or no
-collision-free goal configuration; ``record.plan_status`` and ``record.message`` say which)."""
+collision-free goal configuration; ``record.plan_status`` and ``record.message`` say which);
+``outside training`` (a DRL planner refused a start or goal outside the workspace its policy
+was trained in; ``record.message`` names the point and the box)."""
 
 
 @dataclass(frozen=True)

@@ -91,6 +91,17 @@ def build_parser() -> argparse.ArgumentParser:
     bplan.add_argument("--time-limit", type=float, default=30.0, help="seconds per planning query")
     bplan.add_argument("--json", action="store_true", help="print one JSON line")
 
+    bgoal = sub.add_parser("bench-goals", help="worlds left without a collision-free goal configuration, by IK "
+                           "seed count, and the goal IK's time (no planning)")
+    bgoal.add_argument("--suite", default="broad", help="random or broad (default broad)")
+    bgoal.add_argument("--robot", default="ur5", help="ur5 or kr16")
+    bgoal.add_argument("--worlds", type=int, default=100)
+    bgoal.add_argument("--first-seed", type=int, default=1_000_000, help="default: the validation split")
+    bgoal.add_argument("--more-seeds", default="0,256", help="comma-separated goal_ik_more_seeds counts")
+    bgoal.add_argument("--from-home", action="store_true", help="seed the IK from the home configuration, "
+                       "not the start (the suites' worlds are drawn free from the start)")
+    bgoal.add_argument("--json", action="store_true")
+
     ev = sub.add_parser("evaluate", help="the paper's experiments: every planner, N runs, results.db, table, plots")
     ev.add_argument("--experiments", default="1-7", help="e.g. 1-7, 1,3, exp4, random-ur5@test")
     ev.add_argument("--planners", default=None,
@@ -294,6 +305,17 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _evaluate(args)
         if args.command == "bench-planners":
             return _bench_planners(args)
+        if args.command == "bench-goals":
+            from rayreach.evaluate.executor import bench_goals
+
+            counts = tuple(int(n) for n in args.more_seeds.split(","))
+            record = bench_goals(args.suite, args.robot, args.worlds, args.first_seed, counts, args.from_home)
+            if args.json:
+                print(json.dumps(record))
+                return 0
+            for n, r in record["counts"].items():
+                print(f"more seeds {n:>5}: {r['statuses']}  {r['ms_per_world']} ms/world")
+            return 0
         if args.command == "bench-acting":
             return _bench_acting(args)
         if args.command == "demo":

@@ -36,6 +36,10 @@ class ExecutionConfig:
     """Success radius around each goal, m (the paper's final target size)."""
     goal_ik_seeds: int = 16
     """Random IK seeds (after the start configuration) for a goal's joint configuration."""
+    goal_ik_more_seeds: int = 256
+    """Further random IK seeds, tried one by one only when those above gave no collision-free
+    solution (tables, shelves, boxes around the goal); 0: the first seeds alone. Measured in
+    ``docs/metrics.md`` (``rayreach bench-goals``)."""
     replan: bool = False
     """Replan when the remaining path becomes invalid (moving obstacles); off as in the paper."""
     lookahead: int = 24
@@ -52,7 +56,8 @@ class RunRecord:
     seed: int
     outcome: str
     """``success``, ``collision``, ``timeout`` (DRL step budget), ``out of bounds`` (DRL left
-    the workspace) or ``no plan`` (see ``plan_status``)."""
+    the workspace), ``outside training`` (DRL refused a start or goal outside its training
+    workspace; see ``message``) or ``no plan`` (see ``plan_status``)."""
     plan_status: str
     """The planner's :class:`Status` value (``solved`` for the DRL planner)."""
     success: bool
@@ -150,23 +155,29 @@ class Executor:
         self.env.reset(seed=seed)
         return self.env.q.copy()
 
-    def goal_configuration(self, goal: np.ndarray, q_seed: np.ndarray, rng: np.random.Generator
+    def goal_configuration(self, goal: np.ndarray, q_seed: np.ndarray, rng: np.random.Generator,
+                           more_rng: np.random.Generator | None = None
                            ) -> tuple[np.ndarray | None, Status | None]:
-        """The first collision-free IK solution for ``goal`` over the seeds (``q_seed`` first),
+        """The first collision-free IK solution for ``goal`` over the seeds (``q_seed`` first,
+        then ``goal_ik_seeds`` from ``rng``, then ``goal_ik_more_seeds`` from ``more_rng``),
         else the reason: unreachable (no seed converged) or in collision (all did, all collide)."""
         converged = False
-        for q in goal_solutions(self.kin, goal, q_seed, rng, self.config.goal_ik_seeds):
+        for q in goal_solutions(self.kin, goal, q_seed, rng, self.config.goal_ik_seeds,
+                                more_rng, self.config.goal_ik_more_seeds):
             converged = True
             if self.checker.valid(q):
                 return q, None
         return None, Status.GOAL_IN_COLLISION if converged else Status.GOAL_UNREACHABLE
 
     def goal_configurations(self, seed: int) -> tuple[list[np.ndarray], Status | None, str]:
-        """Joint goals for the current query, the same for every planner of run ``seed``."""
-        rng = np.random.default_rng([seed, 7])
+        """Joint goals for the current query, the same for every planner of run ``seed``.
+
+        The further seeds have a stream of their own, so a goal the first seeds solve gets the
+        configuration it got before they existed."""
+        rng, more_rng = np.random.default_rng([seed, 7]), np.random.default_rng([seed, 7, 1])
         q, goals = self.env.q.copy(), []
         for i, goal in enumerate(self.env.goals):
-            q_goal, bad = self.goal_configuration(goal, q, rng)
+            q_goal, bad = self.goal_configuration(goal, q, rng, more_rng)
             if q_goal is None:
                 return goals, bad, f"goal {i} at {np.round(goal, 3).tolist()}: {bad.value}"  # type: ignore[union-attr]
             goals.append(q_goal)
@@ -201,7 +212,16 @@ class Executor:
         if self.env.config.observation != planner.observation:
             self.env.set_observation(planner.observation)
         planner.reset(seed)
-        episode = run_episode(env, planner.act, seed)
+        start = env.reset(seed=seed)
+        refusal = getattr(planner, "refusal", None)  # DRLPlanner: refuses scenes it was not trained for
+        why = refusal(self.env.ee_pos, self.env.goals) if refusal is not None else None
+        if why:
+            refused = Status.OUTSIDE_TRAINING.value
+            return self._record(planner, seed, config={**planner.config(), **self._acting_record(env)},
+                                outcome=refused, plan_status=refused, success=False, collision=False,
+                                path_length=math.nan, path_length_unsmoothed=math.nan, joint_path_length=math.nan,
+                                planning_time=0.0, motion_time=0.0, steps=0, message=why)
+        episode = run_episode(env, planner.act, seed, start=start)
         info = episode.info
         length = episode.path_length
         return self._record(planner, seed, config={**planner.config(), **self._acting_record(env)},
@@ -303,3 +323,40 @@ class Executor:
     def _ahead_valid(self, upcoming: np.ndarray) -> bool:
         """The next configurations are free of the obstacles where they are now."""
         return all(self.checker.valid(q) for q in upcoming)
+
+
+
+def bench_goals(suite: str = "broad", robot: str = "ur5", worlds: int = 100, first_seed: int = 1_000_000,
+                more_seeds: tuple[int, ...] = (0, ExecutionConfig.goal_ik_more_seeds),
+                from_home: bool = False) -> dict[str, Any]:
+    """How many of ``worlds`` worlds of ``suite`` (seeds from ``first_seed``; 1,000,000: the
+    validation split) end with no goal configuration, by ``goal_ik_more_seeds`` count, and the
+    milliseconds the goal IK takes per world: to choose that count by measurement. No planning.
+
+    The broad and random worlds are drawn so that IK seeded from the start is collision-free;
+    ``from_home`` seeds it from the robot's home configuration instead, as for a scene whose
+    start says nothing about the goal's free posture."""
+    from dataclasses import replace
+
+    out: dict[str, Any] = {"suite": suite, "robot": robot, "worlds": worlds, "first_seed": first_seed,
+                           "from_home": from_home, "counts": {}}
+    with Executor(suite, robot=robot) as ex:
+        for n in more_seeds:
+            ex.config = replace(ex.config, goal_ik_more_seeds=n)
+            statuses: dict[str, int] = {}
+            seconds = 0.0
+            for seed in range(first_seed, first_seed + worlds):
+                ex.reset(seed)
+                t0 = time.perf_counter()
+                if from_home:
+                    _, bad = ex.goal_configuration(ex.env.goals[0], np.asarray(ex.spec.home, dtype=float),
+                                                   np.random.default_rng([seed, 7]),
+                                                   np.random.default_rng([seed, 7, 1]))
+                else:
+                    bad = ex.goal_configurations(seed)[1]
+                seconds += time.perf_counter() - t0
+                key = "ok" if bad is None else bad.value
+                statuses[key] = statuses.get(key, 0) + 1
+            out["counts"][str(n)] = {"statuses": dict(sorted(statuses.items())),
+                                     "ms_per_world": round(1000 * seconds / worlds, 2)}
+    return out

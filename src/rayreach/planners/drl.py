@@ -58,16 +58,34 @@ def resolve_model(name_or_path: str | Path) -> Path:
     )
 
 
+UNSEEN_MARGIN = 0.05
+"""How far (m) a start or goal may lie outside the training workspace before the DRL planner
+refuses the query."""
+
+
 class DRLPlanner(ReactivePlanner):
     """The trained policy acting through ``acting`` (``ActingConfig.off()``, planner
-    ``drl-alone``: the policy itself, as the paper's agent acted)."""
+    ``drl-alone``: the policy itself, as the paper's agent acted).
+
+    The policy was trained only in its robot's training workspace, the box
+    ``RobotSpec.workspace_low`` .. ``workspace_high`` (world frame, robot at its default base;
+    UR5: x -0.4..0.4, y 0.3..0.7, z 0.2..0.5 m; KR16: x -0.8..0.8, y -0.4..0.8, z 0.4..1.8 m),
+    among the obstacle kinds of its training worlds. Outside that box its actions are
+    guesses: it times out or wanders. So with ``refuse_unseen`` (the default) a query whose
+    start or any goal lies more than ``unseen_margin`` outside the box is refused before the
+    arm moves, recorded as ``outside training`` with a message naming the point and the box;
+    a sampling planner (``rrt``, ``birrt``, ``ncrrt``, ``ompl-rrtconnect``) can plan such a
+    scene. ``refuse_unseen=False`` runs the policy there anyway. A user's scene should keep
+    its start and goals inside the box (moving the scene, or the robot's base, to fit)."""
 
     def __init__(self, model: str | Path, deterministic: bool = True, acting: ActingConfig = ActingConfig(),
-                 name: str = "drl") -> None:
+                 name: str = "drl", refuse_unseen: bool = True, unseen_margin: float = UNSEEN_MARGIN) -> None:
         self.policy = load_policy(resolve_model(model))
         self.deterministic = deterministic
         self.acting = acting
         self.name = name
+        self.refuse_unseen = refuse_unseen
+        self.unseen_margin = unseen_margin
         self.observation = self.policy.observation
         self._acting = ActingPolicy(self.policy, deterministic=deterministic, resample=acting.resample)
 
@@ -81,8 +99,31 @@ class DRLPlanner(ReactivePlanner):
     def act(self, observation: np.ndarray, info: dict[str, Any]) -> np.ndarray:
         return self._acting.act(observation, info)
 
+    def refusal(self, start: np.ndarray, goals: np.ndarray) -> str | None:
+        """Why the policy will not run a query from tool position ``start`` to ``goals``
+        (world frame, m): the first point outside its training workspace by more than the
+        margin; None when it will (or ``refuse_unseen`` is off)."""
+        if not self.refuse_unseen:
+            return None
+        from rayreach.robots import get_robot
+
+        spec = get_robot(self.robot)
+        low, high = np.asarray(spec.workspace_low, dtype=float), np.asarray(spec.workspace_high, dtype=float)
+        points = [("start", np.asarray(start, dtype=float))]
+        points += [(f"goal {i}", np.asarray(g, dtype=float)) for i, g in enumerate(goals)]
+        for label, point in points:
+            excess = float(max(np.max(low - point), np.max(point - high)))
+            if excess > self.unseen_margin:
+                return (f"outside training: the {label} at {np.round(point, 3).tolist()} lies {excess:.2f} m "
+                        f"outside the training workspace of the {spec.name} policy, "
+                        f"{list(spec.workspace_low)} .. {list(spec.workspace_high)} m (margin "
+                        f"{self.unseen_margin} m); the policy was not trained there. A sampling planner "
+                        "(rrt, birrt, ncrrt, ompl-rrtconnect) can plan this scene; "
+                        "DRLPlanner(..., refuse_unseen=False) runs the policy anyway")
+        return None
+
     def config(self) -> dict[str, Any]:
         meta = self.policy.meta
         return {"planner": self.name, "model": str(self.policy.path), "deterministic": self.deterministic,
-                "resample_held": self._acting.draws_where_held, "acting_layers": list(self.acting.layers),
+                "resample_held": self._acting.draws_where_held, "refuse_unseen": self.refuse_unseen, "acting_layers": list(self.acting.layers),
                 "timesteps": meta.get("timesteps"), "git_commit": meta.get("git_commit")}

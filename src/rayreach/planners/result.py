@@ -16,6 +16,9 @@ class Status(str, Enum):
     GOAL_IN_COLLISION = "goal in collision"
     GOAL_UNREACHABLE = "goal unreachable"
     CRASH = "crash"
+    OUTSIDE_TRAINING = "outside training"
+    """A DRL planner refused the query: its start or a goal lies outside the workspace the
+    policy was trained in (``DRLPlanner.refusal``); a sampling planner can plan it."""
 
 
 @dataclass

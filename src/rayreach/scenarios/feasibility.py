@@ -47,13 +47,26 @@ def solve_start(scenario: Scenario, kin: Kinematics, n_random_seeds: int = 8) ->
 
 
 def goal_solutions(
-    kin: Kinematics, goal: Sequence[float], q_seed: np.ndarray, rng: np.random.Generator, n_random_seeds: int = 8
+    kin: Kinematics, goal: Sequence[float], q_seed: np.ndarray, rng: np.random.Generator, n_random_seeds: int = 8,
+    more_rng: np.random.Generator | None = None, n_more_seeds: int = 0,
 ) -> Iterator[np.ndarray]:
     """Configurations whose tool tip is at ``goal`` (position only), one per converged seed,
-    in seed order (``q_seed`` first)."""
+    in seed order (``q_seed`` first).
+
+    After the ``n_random_seeds`` of ``rng``, ``n_more_seeds`` further random seeds come from
+    ``more_rng``, drawn one at a time: a caller that stops at the first usable solution pays
+    for them only when the first seeds gave none, and those first seeds stay the same
+    whatever ``n_more_seeds`` is."""
     target = np.asarray(goal, dtype=float)
     for seed in ik_seeds(kin, q_seed, n_random_seeds, rng):
         result = kin.ik(target, None, seed, _REACH_IK)
+        if result.converged:
+            yield result.q
+    if more_rng is None:
+        return
+    low, high = np.maximum(kin.lower, -np.pi), np.minimum(kin.upper, np.pi)
+    for _ in range(n_more_seeds):
+        result = kin.ik(target, None, more_rng.uniform(low, high), _REACH_IK)
         if result.converged:
             yield result.q
 
