@@ -2,11 +2,11 @@
 worlds at once.
 
 ``BatchedReachEnv(robot, n_worlds)`` is a stable-baselines3 ``VecEnv``: the same observation
-(the paper's 142 values and any ``EnvConfig.observation`` adds, same order), action, reward terms, episode ends and seeding as N ``ReachEnv``
-objects, world ``i`` seeded as ``ReachEnv.reset(seed=seed + i)`` would be
-(``tests/test_batched_env.py`` steps both through the same worlds). A single env pays
-numpy's per-call overhead on arrays of three to six values in every part of a step; here
-each part is one call over all worlds:
+(the paper's 142 values and what ``EnvConfig.observation`` adds, same order), action, reward
+terms, episode ends and seeding as N ``ReachEnv`` objects, world ``i`` seeded as
+``ReachEnv.reset(seed=seed + i)`` would be (``tests/test_batched_env.py`` steps both through
+the same worlds). A single env pays numpy's per-call overhead on arrays of three to six
+values in every part of a step; here each part is one call over all worlds:
 
 =================  ============================================================================
 IK                 ``sim.batch_kinematics``: Algorithm 1 per world, compiled

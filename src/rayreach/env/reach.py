@@ -400,8 +400,9 @@ class ReachEnv(gym.Env):
     def _observer_args(self, distance: float, rays: np.ndarray) -> tuple:
         """This world's row of ``Observer.reset``'s and ``step``'s arguments."""
         scenario = self.scenario
+        assert scenario is not None
         return (_FIRST, self._observation(distance, rays)[None], self.ee_pos[None], rays[None],
-                np.asarray(scenario.workspace_low)[None], np.asarray(scenario.workspace_high)[None])  # type: ignore[union-attr]
+                np.asarray(scenario.workspace_low)[None], np.asarray(scenario.workspace_high)[None])
 
     def _observation(self, distance: float, rays: np.ndarray) -> np.ndarray:
         """The paper's 142 values."""

@@ -169,13 +169,16 @@ class Executor:
                 return q, None
         return None, Status.GOAL_IN_COLLISION if converged else Status.GOAL_UNREACHABLE
 
-    def goal_configurations(self, seed: int) -> tuple[list[np.ndarray], Status | None, str]:
-        """Joint goals for the current query, the same for every planner of run ``seed``.
+    def goal_configurations(self, seed: int, q_first: np.ndarray | None = None
+                            ) -> tuple[list[np.ndarray], Status | None, str]:
+        """Joint goals for the current query, the same for every planner of run ``seed``; the
+        first goal's IK is seeded from ``q_first`` (default: the start configuration), each
+        next one's from the goal before.
 
         The further seeds have a stream of their own, so a goal the first seeds solve gets the
         configuration it got before they existed."""
         rng, more_rng = np.random.default_rng([seed, 7]), np.random.default_rng([seed, 7, 1])
-        q, goals = self.env.q.copy(), []
+        q, goals = (self.env.q.copy() if q_first is None else q_first), []
         for i, goal in enumerate(self.env.goals):
             q_goal, bad = self.goal_configuration(goal, q, rng, more_rng)
             if q_goal is None:
@@ -213,8 +216,7 @@ class Executor:
             self.env.set_observation(planner.observation)
         planner.reset(seed)
         start = env.reset(seed=seed)
-        refusal = getattr(planner, "refusal", None)  # DRLPlanner: refuses scenes it was not trained for
-        why = refusal(self.env.ee_pos, self.env.goals) if refusal is not None else None
+        why = planner.refusal(self.env.ee_pos, self.env.goals)
         if why:
             refused = Status.OUTSIDE_TRAINING.value
             return self._record(planner, seed, config={**planner.config(), **self._acting_record(env)},
@@ -325,7 +327,6 @@ class Executor:
         return all(self.checker.valid(q) for q in upcoming)
 
 
-
 def bench_goals(suite: str = "broad", robot: str = "ur5", worlds: int = 100, first_seed: int = 1_000_000,
                 more_seeds: tuple[int, ...] = (0, ExecutionConfig.goal_ik_more_seeds),
                 from_home: bool = False) -> dict[str, Any]:
@@ -348,12 +349,8 @@ def bench_goals(suite: str = "broad", robot: str = "ur5", worlds: int = 100, fir
             for seed in range(first_seed, first_seed + worlds):
                 ex.reset(seed)
                 t0 = time.perf_counter()
-                if from_home:
-                    _, bad = ex.goal_configuration(ex.env.goals[0], np.asarray(ex.spec.home, dtype=float),
-                                                   np.random.default_rng([seed, 7]),
-                                                   np.random.default_rng([seed, 7, 1]))
-                else:
-                    bad = ex.goal_configurations(seed)[1]
+                q_first = np.asarray(ex.spec.home, dtype=float) if from_home else None
+                bad = ex.goal_configurations(seed, q_first)[1]
                 seconds += time.perf_counter() - t0
                 key = "ok" if bad is None else bad.value
                 statuses[key] = statuses.get(key, 0) + 1

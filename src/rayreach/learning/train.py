@@ -163,10 +163,11 @@ code used), over 32 worlds x 256 steps: 8,192 samples per update."""
 
 RECIPES: dict[str, TrainConfig] = {
     "default": TrainConfig(),
-    "baseline": TrainConfig(recipe="baseline", envs=32, vec_env="workers", observation=ObservationConfig(), timesteps=20_000_000,
-                            **PAPER_PPO),
-    "paper": TrainConfig(recipe="paper", envs=32, timesteps=20_000_000, observation=ObservationConfig(), normalize=False, progress_weight=0.0,
-                         proximity_weight=0.0, true_goal_share=0.0, target_kl=None, **PAPER_PPO),
+    "baseline": TrainConfig(recipe="baseline", envs=32, vec_env="workers", observation=ObservationConfig(),
+                            timesteps=20_000_000, **PAPER_PPO),
+    "paper": TrainConfig(recipe="paper", envs=32, timesteps=20_000_000, observation=ObservationConfig(),
+                         normalize=False, progress_weight=0.0, proximity_weight=0.0, true_goal_share=0.0,
+                         target_kl=None, **PAPER_PPO),
 }
 """Named starting points of a run. "default": the planner's observation on batched worlds
 with rsl_rl's large-batch update. "baseline": the recipe of the shipped runs, 32 worlds in

@@ -44,6 +44,12 @@ class ReactivePlanner(ABC):
     def reset(self, seed: int) -> None:
         """Called before each run with the run's seed (for a planner that draws at random)."""
 
+    def refusal(self, start: np.ndarray, goals: np.ndarray) -> str | None:
+        """Why the planner will not run a query from tool position ``start`` to ``goals``
+        (recorded as ``outside training``); None: it will (every planner but a policy trained
+        elsewhere)."""
+        return None
+
     @abstractmethod
     def act(self, observation: np.ndarray, info: dict[str, Any]) -> np.ndarray:
         """The action for this control step; ``info``: the last step's (or reset's)."""

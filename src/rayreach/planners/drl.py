@@ -125,5 +125,6 @@ class DRLPlanner(ReactivePlanner):
     def config(self) -> dict[str, Any]:
         meta = self.policy.meta
         return {"planner": self.name, "model": str(self.policy.path), "deterministic": self.deterministic,
-                "resample_held": self._acting.draws_where_held, "refuse_unseen": self.refuse_unseen, "acting_layers": list(self.acting.layers),
+                "resample_held": self._acting.draws_where_held, "refuse_unseen": self.refuse_unseen,
+                "acting_layers": list(self.acting.layers),
                 "timesteps": meta.get("timesteps"), "git_commit": meta.get("git_commit")}

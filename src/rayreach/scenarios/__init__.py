@@ -29,8 +29,10 @@ def get_scenario(name: str | Path | Scenario) -> Scenario:
     if text.endswith(".json") or Path(text).is_file():
         return load_scenario_file(text)
     raise ScenarioError(
-        f"unknown scenario '{text}'; known: {', '.join(EXPERIMENTS)}, {', '.join(WORLD_SUITES)}, or a path to a .json scene file"
+        f"unknown scenario '{text}'; known: {', '.join(EXPERIMENTS)}, {', '.join(WORLD_SUITES)}, "
+        "or a path to a .json scene file"
     )
 
 
-__all__ = ["BROAD", "EXPERIMENTS", "RANDOM", "WORLD_SUITES", "ObstacleSpec", "Scenario", "ScenarioError", "StartSpec", "get_scenario"]
+__all__ = ["BROAD", "EXPERIMENTS", "RANDOM", "WORLD_SUITES", "ObstacleSpec", "Scenario", "ScenarioError", "StartSpec",
+           "get_scenario"]

@@ -16,11 +16,14 @@ REACH_TOLERANCE = 1e-4
 _REACH_IK = IKParams(tolerance=REACH_TOLERANCE, max_iterations=200)
 
 
+def random_seed(kin: Kinematics, rng: np.random.Generator) -> np.ndarray:
+    """A random configuration within the joint limits (clipped to +-pi), to seed IK from."""
+    return rng.uniform(np.maximum(kin.lower, -np.pi), np.minimum(kin.upper, np.pi))
+
+
 def ik_seeds(kin: Kinematics, first: Sequence[float], n_random: int, rng: np.random.Generator) -> list[np.ndarray]:
     """The given seed, then random configurations within the joint limits (clipped to +-pi)."""
-    low = np.maximum(kin.lower, -np.pi)
-    high = np.minimum(kin.upper, np.pi)
-    return [np.asarray(first, dtype=float)] + [rng.uniform(low, high) for _ in range(n_random)]
+    return [np.asarray(first, dtype=float)] + [random_seed(kin, rng) for _ in range(n_random)]
 
 
 def solve_start(scenario: Scenario, kin: Kinematics, n_random_seeds: int = 8) -> np.ndarray:
@@ -64,9 +67,8 @@ def goal_solutions(
             yield result.q
     if more_rng is None:
         return
-    low, high = np.maximum(kin.lower, -np.pi), np.minimum(kin.upper, np.pi)
     for _ in range(n_more_seeds):
-        result = kin.ik(target, None, more_rng.uniform(low, high), _REACH_IK)
+        result = kin.ik(target, None, random_seed(kin, more_rng), _REACH_IK)
         if result.converged:
             yield result.q
 
