@@ -10,7 +10,7 @@ from rayreach.robots import get_robot
 from rayreach.sim.scene import Scene
 from rayreach.sim.sensors import RayModel
 
-ROBOTS = ("ur5", "kr16")
+ROBOTS = ("ur5", "kr16", "ur10")
 
 
 class RobotRig:

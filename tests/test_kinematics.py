@@ -1,17 +1,22 @@
-"""DH forward kinematics, Jacobian and DLS inverse kinematics against independent references:
-PyBullet's own forward kinematics and Jacobian, finite differences, and DH matrices built here."""
+"""Forward kinematics over the joint chain (the paper's DH table, or the URDF's joints), Jacobian
+and DLS inverse kinematics against independent references: PyBullet's own forward kinematics
+and Jacobian, finite differences, and DH and joint matrices built here."""
 
 from __future__ import annotations
 
 import math
+import re
+from dataclasses import replace
 
 import numpy as np
 import pybullet as p
 import pytest
 
+from rayreach.robots.chain import urdf_chain
+from rayreach.sim.ik_kernel import frames_kernel
 from rayreach.sim.kinematics import IKParams, Kinematics
 from rayreach.sim.scene import Scene
-from rayreach.sim.transforms import matrix_to_rotvec, quaternion_to_matrix, rpy_to_matrix
+from rayreach.sim.transforms import matrix_to_rotvec, pose_matrix, quaternion_to_matrix, rpy_to_matrix
 
 # PyBullet accumulates link poses in single precision: its quaternions are off unit length by
 # up to ~3e-7, so they are normalised before comparison (errors seen: ~1.3e-7 m, ~7e-7 rad).
@@ -63,7 +68,7 @@ def test_fk_tool_tip_is_tool_length_along_flange_z(rig):
         np.testing.assert_allclose(tip[:3, :3], flange[:3, :3], atol=1e-12)
 
 
-@pytest.mark.parametrize("name", ["ur5", "kr16"])
+@pytest.mark.parametrize("name", ["ur5", "kr16", "ur10"])
 def test_fk_with_a_custom_base_pose_matches_pybullet(name, rigs):
     """The base pose is folded into frame 0: a moved and turned base must agree too."""
     spec = rigs[name].spec
@@ -109,32 +114,75 @@ def _dh_reference(theta: float, d: float, a: float, alpha: float) -> np.ndarray:
     return rz(theta) @ tz(d) @ tx(a) @ rx(alpha)
 
 
-def test_dh_matrices_are_paper_eq2_standard_dh(rig):
-    rng = np.random.default_rng(5)
+@pytest.mark.parametrize("name", ["ur5", "kr16"])
+def test_frames_chain_paper_eq2_dh_matrices_from_the_world_base(name, rigs):
+    """Paper eq. 1: frame i = frame 0 @ prod_{k<=i} T_k (eq. 2, built here), frame 0 = base pose @
+    DH base rotation: the chain form of the DH table is the paper's kinematics."""
+    rig = rigs[name]
     dh = rig.spec.dh
-    for _ in range(20):
-        q = rig.random_q(rng)
-        mats = rig.kin.dh_matrices(q)
-        assert mats.shape == (6, 4, 4)
-        for i in range(6):
-            theta = dh.sign[i] * q[i] + dh.offset[i]
-            ref = _dh_reference(theta, dh.d[i], dh.a[i], dh.alpha[i])
-            np.testing.assert_allclose(mats[i], ref, atol=1e-12, err_msg=f"joint {i}")
-
-
-def test_frames_chain_the_dh_matrices_from_the_world_base(rig):
-    """Paper eq. 1: frame i = frame 0 @ prod_{k<=i} T_k, frame 0 = base pose @ DH base rotation."""
-    q = rig.random_q(np.random.default_rng(3))
-    frames = rig.kin.frames(q)
-    mats = rig.kin.dh_matrices(q)
+    rng = np.random.default_rng(5)
     base = np.eye(4)
     base[:3, :3] = rpy_to_matrix(rig.spec.base_rpy) @ rpy_to_matrix(rig.spec.dh_base_rpy)
     base[:3, 3] = rig.spec.base_position
-    np.testing.assert_allclose(frames[0], base, atol=1e-12)
-    acc = base
-    for i in range(6):
-        acc = acc @ mats[i]
-        np.testing.assert_allclose(frames[i + 1], acc, atol=1e-12)
+    for _ in range(20):
+        q = rig.random_q(rng)
+        frames = rig.kin.frames(q)
+        np.testing.assert_allclose(frames[0], base, atol=1e-12)
+        acc = base
+        for i in range(6):
+            acc = acc @ _dh_reference(dh.sign[i] * q[i] + dh.offset[i], dh.d[i], dh.a[i], dh.alpha[i])
+            np.testing.assert_allclose(frames[i + 1], acc, atol=1e-12, err_msg=f"joint {i}")
+
+
+@pytest.mark.parametrize("name", ["ur5", "kr16"])
+def test_urdf_chain_agrees_with_the_dh_table(name, rigs):
+    """The paper's two robots read from their URDF's joints, without the DH table, place the
+    flange and the tool tip where the DH chain does, and have the same Jacobian there."""
+    dh_kin = rigs[name].kin
+    urdf_kin = Kinematics(replace(rigs[name].spec, dh=None))
+    assert urdf_kin.chain.key() != dh_kin.chain.key()  # two different chains, one arm
+    rng = np.random.default_rng(11)
+    for _ in range(1000):
+        q = rigs[name].random_q(rng)
+        a, b = dh_kin.frames(q), urdf_kin.frames(q)
+        np.testing.assert_allclose(b[-1], a[-1], atol=1e-9)
+        np.testing.assert_allclose(urdf_kin.fk(q), dh_kin.fk(q), atol=1e-9)
+    np.testing.assert_allclose(urdf_kin.jacobian(b), dh_kin.jacobian(a), atol=1e-9)
+
+
+URDF_TWO_JOINTS = """<robot name="two">
+  <link name="base"/><link name="upper"/><link name="tip"/><link name="flange"/>
+  <joint name="j1" type="revolute"><parent link="base"/><child link="upper"/>
+    <origin xyz="0 0 0.5" rpy="0 0 0"/><axis xyz="0 0 1"/></joint>
+  <joint name="j2" type="{kind}"><parent link="upper"/><child link="tip"/>
+    <origin xyz="0.3 0 0" rpy="0 1.5707963267948966 0"/><axis xyz="0 1 0"/></joint>
+  <joint name="j3" type="fixed"><parent link="tip"/><child link="flange"/><origin xyz="0 0 0.2"/></joint>
+  <transmission name="t1"><joint name="j1"/></transmission>
+</robot>"""
+
+
+def test_urdf_chain_of_a_small_arm_by_hand():
+    """Two joints and a fixed flange, composed here by hand: origin, then the turn about the axis."""
+    chain = urdf_chain(URDF_TWO_JOINTS.format(kind="revolute"), ("j1", "j2"), "flange")
+    assert chain.n_joints == 2
+    np.testing.assert_allclose(chain.axis, [[0, 0, 1], [0, 1, 0]])
+    q = np.array([0.4, -0.7])
+    expected = (pose_matrix((0, 0, 0.5), rpy_to_matrix((0, 0, q[0])))
+                @ pose_matrix((0.3, 0, 0), rpy_to_matrix((0, math.pi / 2, 0)) @ rpy_to_matrix((0, q[1], 0)))
+                @ pose_matrix((0, 0, 0.2), np.eye(3)))
+    out = np.empty((3, 4, 4))
+    frames_kernel(np.eye(4), chain.before, chain.axis, chain.after, q, out)
+    np.testing.assert_allclose(out[-1], expected, atol=1e-12)
+
+
+@pytest.mark.parametrize("names, tip, kind, message", [
+    (("j1", "j2"), "nowhere", "revolute", "URDF has no link 'nowhere'; links: base, flange, tip, upper"),
+    (("j2", "j1"), "flange", "revolute", "moving joints from 'base' to 'flange' are ('j1', 'j2')"),
+    (("j1", "j2"), "flange", "prismatic", "joint 'j2' is prismatic; a chain takes revolute, continuous or fixed"),
+])
+def test_urdf_chain_refuses_what_it_cannot_read(names, tip, kind, message):
+    with pytest.raises(ValueError, match=re.escape(message)):
+        urdf_chain(URDF_TWO_JOINTS.format(kind=kind), names, tip)
 
 
 # ---------------------------------------------------------------------- Jacobian
@@ -249,8 +297,9 @@ def test_ik_unreachable_target_reports_failure(rig):
     kin = rig.kin
     base = np.asarray(rig.spec.base_position)
     rng = np.random.default_rng(31)
-    dh = rig.spec.dh
-    reach = sum(map(abs, dh.a)) + sum(map(abs, dh.d)) + rig.spec.tool.length  # bound on |tip - base|
+    chain = rig.kin.chain  # bound on |tip - base|: every link's offset laid end to end
+    reach = (np.linalg.norm(chain.before[:, :3, 3], axis=1).sum() + np.linalg.norm(chain.after[:, :3, 3], axis=1).sum()
+             + rig.spec.tool.length)
     for direction in ([1.0, 0.0, 0.0], [0.0, -1.0, 0.3], [0.3, 0.4, 1.0]):
         d = np.asarray(direction) / np.linalg.norm(direction)
         target = base + 3.0 * d

@@ -62,11 +62,15 @@ def test_cli_model_options_take_robot_names(capsys):
 def test_robots_lists_each_robot_with_its_source(capsys):
     assert main(["robots", "--json"]) == 0
     rows = json.loads(capsys.readouterr().out)
-    assert [r["name"] for r in rows] == ["ur5", "kr16"]
+    assert [r["name"] for r in rows] == ["ur5", "kr16", "ur10"]
     by_name = {r["name"]: r for r in rows}
-    assert by_name["ur5"]["package"] == "example-robot-data" and by_name["kr16"]["package"] == "rtb-data"
-    assert all(r["dof"] == 6 and r["shipped_policy"] and Path(r["policy"]).is_file() for r in rows)
-    assert [r["env_id"] for r in rows] == ["rayreach/Reach-UR5-v0", "rayreach/Reach-KR16-v0"]
+    assert by_name["ur5"]["package"] == by_name["ur10"]["package"] == "example-robot-data"
+    assert by_name["kr16"]["package"] == "rtb-data"
+    assert [r["kinematics"] for r in rows] == ["DH table", "DH table", "URDF joints"]
+    assert all(r["dof"] == 6 for r in rows)
+    assert all(Path(r["policy"]).is_file() for r in rows if r["shipped_policy"])
+    assert [r["name"] for r in rows if r["shipped_policy"]] == list(shipped_robots())
+    assert [r["env_id"] for r in rows] == ["rayreach/Reach-UR5-v0", "rayreach/Reach-KR16-v0", "rayreach/Reach-UR10-v0"]
     assert all(r["env_id"] in ENV_IDS for r in rows)
     assert main(["robots"]) == 0
     table = capsys.readouterr().out.splitlines()

@@ -20,7 +20,7 @@ from gymnasium.envs.registration import register, registry
 __version__ = "0.1.0"
 
 ENV_IDS: list[str] = []
-for _robot in ("UR5", "KR16"):
+for _robot in ("UR5", "KR16", "UR10"):
     _id = f"rayreach/Reach-{_robot}-v0"
     if _id not in registry:
         # no max_episode_steps: the env truncates itself at its step budget, with the paper's -5

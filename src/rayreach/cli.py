@@ -8,12 +8,14 @@ import sys
 from pathlib import Path
 from typing import Sequence
 
+from rayreach.robots import ROBOTS  # specs only: numpy, no simulator
 
 EVAL_PLANNERS = "drl,rrt,ncrrt,ompl-rrt,ompl-rrtconnect"
 TRAIN_RECIPES = ("default", "baseline", "paper")
+"""``rayreach.learning.train.RECIPES``' names (that module imports torch's stack)."""
 COMPARE_VARIANTS = ("baseline", "default", "paper", "paper-observation", "no-scans", "no-workspace", "entropy")
 """``rayreach.evaluate.compare_recipes.VARIANTS``' names."""
-"""``rayreach.learning.train.RECIPES``' names (that module imports torch's stack)."""
+ROBOT_HELP = " or ".join(ROBOTS)
 
 LAYER_HELP = {"final_approach": "straight final approach near the goal", "ray_shield": "ray shield and its hit memory",
               "slide": "shield's slide towards the goal", "workspace_guard": "workspace guard",
@@ -30,7 +32,7 @@ def _scenario_arg(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--scenario", dest="scenario_opt", help="same as the positional SCENARIO")
 
 
-MODEL_HELP = "ur5 or kr16 (that robot's shipped policy), or a model or checkpoint .zip"
+MODEL_HELP = f"{ROBOT_HELP} (that robot's shipped policy), or a model or checkpoint .zip"
 
 
 def _model(name_or_path: str):
@@ -67,7 +69,7 @@ def build_parser() -> argparse.ArgumentParser:
     show.add_argument("--video", default=None, help="also write the run as a GIF, e.g. exp4.gif")
 
     bench = sub.add_parser("bench-env", help="environment steps per second for both ray backends")
-    bench.add_argument("--robot", default="ur5", help="ur5 or kr16")
+    bench.add_argument("--robot", default="ur5", help=ROBOT_HELP)
     bench.add_argument("--scenario", default="exp1", help="exp1..exp7, random, or a scene file")
     bench.add_argument("--steps", type=int, default=3000)
     bench.add_argument("--rounds", type=int, default=3, help="interleaved blocks per backend")
@@ -94,7 +96,7 @@ def build_parser() -> argparse.ArgumentParser:
     bgoal = sub.add_parser("bench-goals", help="worlds left without a collision-free goal configuration, by IK "
                            "seed count, and the goal IK's time (no planning)")
     bgoal.add_argument("--suite", default="broad", help="random or broad (default broad)")
-    bgoal.add_argument("--robot", default="ur5", help="ur5 or kr16")
+    bgoal.add_argument("--robot", default="ur5", help=ROBOT_HELP)
     bgoal.add_argument("--worlds", type=int, default=100)
     bgoal.add_argument("--first-seed", type=int, default=1_000_000, help="default: the validation split")
     bgoal.add_argument("--more-seeds", default="0,256", help="comma-separated goal_ik_more_seeds counts")
@@ -136,7 +138,7 @@ def build_parser() -> argparse.ArgumentParser:
                          "needs pip install rayreach[ray]")
 
     train = sub.add_parser("train", help="train a PPO policy on random worlds (resumable)")
-    train.add_argument("--robot", required=True, help="ur5 or kr16")
+    train.add_argument("--robot", required=True, help=ROBOT_HELP)
     train.add_argument("--timesteps", type=int, default=None,
                        help="total environment steps (default: the recipe's, 40 M for default, about 2 h on 2 cores)")
     train.add_argument("--recipe", choices=TRAIN_RECIPES, default="default",
@@ -181,7 +183,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     sweep = sub.add_parser("sweep", help="train one run per seed (or per value of a setting), each in its own "
                                          "directory, resumable; on Ray with --ray")
-    sweep.add_argument("--robot", required=True, help="ur5 or kr16")
+    sweep.add_argument("--robot", required=True, help=ROBOT_HELP)
     sweep.add_argument("--seeds", default="0", help="e.g. 0,1,2 or 0-4: one trial per seed")
     sweep.add_argument("--set", dest="setting", default=None, metavar="FIELD=V1,V2",
                        help="also one trial per value of this TrainConfig field (e.g. learning_rate=3e-4,1e-3)")
@@ -195,13 +197,13 @@ def build_parser() -> argparse.ArgumentParser:
     sweep.add_argument("--cpus", type=int, default=2, help="CPUs per trial with --ray (its workers)")
 
     btrain = sub.add_parser("bench-train", help="training samples per second: the baseline recipe, then the default")
-    btrain.add_argument("--robot", default="ur5", help="ur5 or kr16")
+    btrain.add_argument("--robot", default="ur5", help=ROBOT_HELP)
     btrain.add_argument("--seconds", type=float, default=120.0, help="timed seconds per recipe, after a warm-up")
     btrain.add_argument("--json", action="store_true", help="print one JSON line")
 
     cmp_ = sub.add_parser("compare-recipes", help="the training recipes on one fixed task at equal wall time, "
                                                   "with curves and a validation check")
-    cmp_.add_argument("--robot", default="ur5", help="ur5 or kr16")
+    cmp_.add_argument("--robot", default="ur5", help=ROBOT_HELP)
     cmp_.add_argument("--minutes", type=float, default=15.0, help="wall time per recipe")
     cmp_.add_argument("--episodes", type=int, default=200, help="validation worlds each final policy runs")
     cmp_.add_argument("--out", required=True, help="directory of the runs, curves.png and summary.json (resumable)")
@@ -708,7 +710,6 @@ def _source_package(urdf: Path) -> str | None:
 def _robots(args: argparse.Namespace) -> int:
     from rayreach import ENV_IDS
     from rayreach.planners.drl import MODELS_DIR, shipped_robots
-    from rayreach.robots import ROBOTS
 
     shipped = shipped_robots()
     rows = []
@@ -718,15 +719,16 @@ def _robots(args: argparse.Namespace) -> int:
         except FileNotFoundError as exc:  # the URDF's package is not installed
             package = f"missing: {exc}"
         env_id = next((i for i in ENV_IDS if i.lower() == f"rayreach/reach-{name}-v0"), None)
-        rows.append({"name": name, "package": package, "dof": spec.n_joints, "shipped_policy": name in shipped,
+        rows.append({"name": name, "package": package, "dof": spec.n_joints,
+                     "kinematics": "URDF joints" if spec.dh is None else "DH table", "shipped_policy": name in shipped,
                      "policy": str(MODELS_DIR / f"{name}.zip") if name in shipped else None, "env_id": env_id})
     if args.json:
         print(json.dumps(rows))
         return 0
-    print(f"{'robot':<8} {'URDF package':<20} {'dof':>3}  {'shipped policy':<14}  Gymnasium id")
+    print(f"{'robot':<8} {'URDF package':<20} {'dof':>3}  {'kinematics':<12} {'shipped policy':<14}  Gymnasium id")
     for r in rows:
-        print(f"{r['name']:<8} {r['package'] or '?':<20} {r['dof']:>3}  {'yes' if r['shipped_policy'] else 'no':<14}  "
-              f"{r['env_id'] or '-'}")
+        print(f"{r['name']:<8} {r['package'] or '?':<20} {r['dof']:>3}  {r['kinematics']:<12} "
+              f"{'yes' if r['shipped_policy'] else 'no':<14}  {r['env_id'] or '-'}")
     return 0
 
 

@@ -65,7 +65,7 @@ import numpy as np
 from rayreach.env import rewards as R
 from rayreach.env.observation import ObservationConfig, Observer
 from rayreach.env.perception import Perception
-from rayreach.robots import RobotSpec, get_robot
+from rayreach.robots import ROBOTS, RobotSpec, get_robot
 from rayreach.scenarios import RANDOM, WORLD_SUITES, Scenario, ScenarioError, get_scenario
 from rayreach.scenarios.feasibility import solve_start, validate
 from rayreach.scenarios.random_world import RandomWorldConfig
@@ -161,7 +161,7 @@ def resolve_task(robot: str | RobotSpec | None, scenario: str | Path | Scenario)
     fixed = None if isinstance(scenario, str) and scenario in WORLD_SUITES else get_scenario(scenario)
     if robot is None:
         if fixed is None:
-            raise ValueError(f"an environment of {scenario} worlds needs a robot (ur5 or kr16)")
+            raise ValueError(f"an environment of {scenario} worlds needs a robot ({', '.join(ROBOTS)})")
         robot = fixed.robot
     spec = get_robot(robot)
     if fixed is not None and fixed.robot != spec.name:

@@ -381,9 +381,10 @@ def write_report(out: str | Path) -> dict[str, Path]:
         written["bars"] = bar_chart(rows, out / "bars.png")
         experiments, planners = _order(rows, "experiment"), _order(rows, "planner")
         fixed = [e for e in experiments if e.startswith("exp")]
+        from rayreach.robots import ROBOTS
         from rayreach.scenarios import get_scenario
 
-        for robot in ("ur5", "kr16"):
+        for robot in ROBOTS:
             mine = [e for e in fixed if get_scenario(e).robot == robot]
             if mine:
                 written[f"trajectories_{robot}"] = trajectory_figure(store, mine, planners,

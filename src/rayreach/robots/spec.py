@@ -35,10 +35,10 @@ class DHTable:
 
 @dataclass(frozen=True)
 class SensorMount:
-    """Where a ray sensor sits: a DH frame index (0 = base, 6 = flange) and a fixed offset.
+    """Where a ray sensor sits: a chain frame index (0 = base, 6 = flange) and a fixed offset.
 
     ``link`` names the URDF link the mount belongs to, for people and for the consistency
-    test; the pose itself is computed from the DH chain, never from PyBullet.
+    test; the pose itself is computed from the joint chain, never from PyBullet.
     """
 
     link: str
@@ -57,9 +57,10 @@ class ToolSpec:
 
 @dataclass(frozen=True)
 class RobotSpec:
-    """A 6-axis arm: URDF source, joints, limits, DH chain, base and tool frames, sensor mounts.
+    """A 6-axis arm: URDF source, joints, limits, base and tool frames, sensor mounts, and the
+    training workspace; the kinematics come from the URDF (or, for the paper's two, a DH table).
 
-    Adding a robot means writing one of these (see ``robots/ur5.py``).
+    Adding a robot means writing one of these (see ``robots/ur10.py``).
     """
 
     name: str
@@ -73,13 +74,17 @@ class RobotSpec:
     velocity: tuple[float, ...]
     """Joint velocity limits in rad/s (from the URDF)."""
     flange_link: str
-    """URDF link whose frame equals the last DH frame (the tool flange, ``tool0``)."""
-    dh: DHTable
-    dh_base_rpy: tuple[float, float, float]
-    """Fixed rotation from the URDF root link to DH frame 0 (the one documented DH-URDF transform)."""
+    """URDF link at the end of the chain (the tool flange, ``tool0``); with a DH table, the link
+    whose frame equals the last DH frame."""
     tool: ToolSpec
     home: tuple[float, ...]
     """A collision-free, well-conditioned configuration used to seed IK."""
+    dh: DHTable | None = None
+    """The paper's DH chain (eqs. 1-2); None: the kinematics come from the URDF's joints from its
+    root link to ``flange_link`` (``rayreach.robots.chain``)."""
+    dh_base_rpy: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    """With ``dh``: fixed rotation from the URDF root link to DH frame 0 (the one documented
+    DH-URDF transform)."""
     base_position: tuple[float, float, float] = (0.0, 0.0, 0.0)
     base_rpy: tuple[float, float, float] = (0.0, 0.0, 0.0)
     mounts: dict[str, SensorMount] = field(default_factory=dict)

@@ -102,7 +102,7 @@ def arm_reach(kin: Kinematics) -> ArmReach:
     shoulder over 1000 random configurations (joints 2-6 decide it), each of the five farthest
     refined by a random local search. The stretched arm is what this finds; a sampled bound
     alone falls a few centimetres short of it. Computed once per robot and base pose (~0.1 s)."""
-    key = (kin.spec.name, kin.spec.dh, kin.spec.tool, kin.world_dh0.tobytes())
+    key = (kin.spec.name, kin.chain.key(), kin.spec.tool, kin.world0.tobytes())
     if key in _REACH_CACHE:
         return _REACH_CACHE[key]
     rng = np.random.default_rng(0)  # fixed: a robot always has the same reach
@@ -263,7 +263,7 @@ class BroadWorlds:
         1.71): the KR16's wrist needs compartments as roomy for it as the UR5's for its own."""
         self.room = spec.tool.radius + 0.02
         """Least distance, m, of a goal from the boards and walls around it."""
-        base_z = float(kin.world_dh0[2, 3])
+        base_z = float(kin.world0[2, 3])
         self.stand_top = base_z if base_z > FLOOR_Z + 0.01 else None
 
     # ------------------------------------------------------------------ the contract
@@ -348,7 +348,7 @@ class BroadWorlds:
         """6-D IK to ``target`` with the default tool orientation, from home and from home turned
         about the base axis towards the target: a start behind the robot is far from home."""
         turned = self.home.copy()
-        sign = float(self.kin.spec.dh.sign[0])
+        sign = self.kin.base_turn_sign
         turn = (self._azimuth(target) - self._home_azimuth + math.pi) % (2 * math.pi) - math.pi
         turned[0] = np.clip(turned[0] + sign * turn, self.kin.lower[0], self.kin.upper[0])
         for seed in (self.home, turned):

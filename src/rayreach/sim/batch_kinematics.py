@@ -21,7 +21,7 @@ def solve_steps(kin: Kinematics, params: IKParams, delta: np.ndarray, q: np.ndar
 
 # ---------------------------------------------------------------------- compiled parts
 @numba.njit(cache=True)
-def _solve_steps(world_dh0, d, a, ca, sa, offset, sign, lower, upper, tool_length, damping2, scale, gain,
+def _solve_steps(world0, before, axis, after, lower, upper, tool_length, damping2, scale, gain,
                  tolerance, max_iterations, delta, q, frames, ee_pos, ee_rot,
                  converged):  # pragma: no cover - compiled
     step_rot = np.empty((3, 3))
@@ -35,10 +35,10 @@ def _solve_steps(world_dh0, d, a, ca, sa, offset, sign, lower, upper, tool_lengt
             for j in range(3):
                 target_rot[i, j] = step_rot[i, 0] * ee_rot[w, 0, j] + step_rot[i, 1] * ee_rot[w, 1, j] \
                     + step_rot[i, 2] * ee_rot[w, 2, j]
-        ik_kernel(world_dh0, d, a, ca, sa, offset, sign, lower, upper, tool_length, damping2, scale, gain,
+        ik_kernel(world0, before, axis, after, lower, upper, tool_length, damping2, scale, gain,
                   tolerance, max_iterations, target_pos, target_rot, 6, q[w], frames[w], result)
         converged[w] = result[0] > 0.5
-        tip = frames[w, 6]
+        tip = frames[w, q.shape[1]]
         for i in range(3):
             ee_pos[w, i] = tip[i, 2] * tool_length + tip[i, 3]
             for j in range(3):

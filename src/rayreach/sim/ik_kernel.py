@@ -1,7 +1,8 @@
-"""Algorithm 1 (damped-least-squares IK) and the DH forward kinematics it iterates, compiled.
+"""Algorithm 1 (damped-least-squares IK) and the forward kinematics it iterates, compiled.
 
 ``Kinematics.ik`` and the batched environment's step both run this one implementation: the
-arithmetic of ``Kinematics``' numpy forward kinematics and Jacobian (paper eqs. 1-2), as
+arithmetic of ``Kinematics``' numpy forward kinematics and Jacobian over the joint chain
+(``rayreach.robots.chain``: the paper's DH table, eqs. 1-2, or the URDF's joints), as
 scalar loops that numba compiles, since numpy's per-call overhead on 4 x 4 and 6 x 6 arrays
 was most of what an IK call cost. ``tests/test_kinematics.py`` holds it to PyBullet and to
 the numpy Jacobian.
@@ -14,26 +15,35 @@ import numpy as np
 
 
 @numba.njit(cache=True)
-def frames_kernel(world_dh0, d, a, ca, sa, offset, sign, q, out):  # pragma: no cover - compiled
-    out[0] = world_dh0
-    for i in range(len(d)):
-        theta = sign[i] * q[i] + offset[i]
-        ct, st = np.cos(theta), np.sin(theta)
-        m00, m01, m02, m03 = ct, -st * ca[i], st * sa[i], a[i] * ct
-        m10, m11, m12, m13 = st, ct * ca[i], -ct * sa[i], a[i] * st
-        m21, m22, m23 = sa[i], ca[i], d[i]
-        f = out[i]
-        g = out[i + 1]
+def frames_kernel(world0, before, axis, after, q, out):  # pragma: no cover - compiled
+    """Frames 0..n of the chain at ``q`` into ``out``: frame i = frame i-1 @ before_i @
+    Rot(axis_i, q_i) @ after_i (``rayreach.robots.chain``), Rodrigues' formula for the turn."""
+    out[0] = world0
+    g = np.empty((3, 4))
+    h = np.empty((3, 4))
+    rot = np.empty((3, 3))
+    for i in range(len(q)):
+        u0, u1, u2 = axis[i, 0], axis[i, 1], axis[i, 2]
+        c, s = np.cos(q[i]), np.sin(q[i])
+        v = 1.0 - c
+        rot[0, 0], rot[0, 1], rot[0, 2] = c + v * u0 * u0, v * u0 * u1 - s * u2, v * u0 * u2 + s * u1
+        rot[1, 0], rot[1, 1], rot[1, 2] = v * u1 * u0 + s * u2, c + v * u1 * u1, v * u1 * u2 - s * u0
+        rot[2, 0], rot[2, 1], rot[2, 2] = v * u2 * u0 - s * u1, v * u2 * u1 + s * u0, c + v * u2 * u2
+        f, b, a, o = out[i], before[i], after[i], out[i + 1]
         for r in range(3):
-            f0, f1, f2, f3 = f[r, 0], f[r, 1], f[r, 2], f[r, 3]
-            g[r, 0] = f0 * m00 + f1 * m10
-            g[r, 1] = f0 * m01 + f1 * m11 + f2 * m21
-            g[r, 2] = f0 * m02 + f1 * m12 + f2 * m22
-            g[r, 3] = f0 * m03 + f1 * m13 + f2 * m23 + f3
-        g[3, 0] = 0.0
-        g[3, 1] = 0.0
-        g[3, 2] = 0.0
-        g[3, 3] = 1.0
+            for col in range(4):
+                g[r, col] = f[r, 0] * b[0, col] + f[r, 1] * b[1, col] + f[r, 2] * b[2, col]
+            g[r, 3] += f[r, 3]
+            for col in range(3):
+                h[r, col] = g[r, 0] * rot[0, col] + g[r, 1] * rot[1, col] + g[r, 2] * rot[2, col]
+            h[r, 3] = g[r, 3]
+            for col in range(4):
+                o[r, col] = h[r, 0] * a[0, col] + h[r, 1] * a[1, col] + h[r, 2] * a[2, col]
+            o[r, 3] += h[r, 3]
+        o[3, 0] = 0.0
+        o[3, 1] = 0.0
+        o[3, 2] = 0.0
+        o[3, 3] = 1.0
 
 
 @numba.njit(cache=True)
@@ -85,7 +95,7 @@ def rotvec_matrix(v, out):  # pragma: no cover - compiled
 @numba.njit(cache=True)
 def _error(frames, tool_length, target_pos, target_rot, rows, rel, out):  # pragma: no cover - compiled
     """Pose error of the tool tip, position then (``rows`` 6) rotation vector, into ``out``."""
-    f = frames[6]
+    f = frames[len(frames) - 1]
     for j in range(3):
         out[j] = target_pos[j] - (f[j, 2] * tool_length + f[j, 3])
     if rows == 3:
@@ -125,14 +135,14 @@ def _solve(m, b, x):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True)
-def ik_kernel(world_dh0, d, a, ca, sa, offset, sign, lower, upper, tool_length, damping2, scale, gain,
+def ik_kernel(world0, before, axis, after, lower, upper, tool_length, damping2, scale, gain,
               tolerance, max_iterations, target_pos, target_rot, rows, q, frames,
               result):  # pragma: no cover - compiled
-    """Algorithm 1 from ``q`` (whose DH frames ``frames`` holds) towards ``target_pos`` and, for
+    """Algorithm 1 from ``q`` (whose chain frames ``frames`` holds) towards ``target_pos`` and, for
     ``rows`` 6, ``target_rot``; ``rows`` 3 solves for the position only. ``q`` and ``frames``
     end at the solution; ``result`` gets (converged, iterations, position error, orientation
     error)."""
-    n = len(d)
+    n = len(q)
     rel = np.empty((3, 3))
     error = np.empty(6)
     jac = np.empty((6, n))
@@ -142,13 +152,22 @@ def ik_kernel(world_dh0, d, a, ca, sa, offset, sign, lower, upper, tool_length, 
     norm = np.sqrt(np.sum(error[:rows] * error[:rows]))
     iterations = 0
     while True:  # do ... while ||x_e|| > epsilon
-        tip = frames[6]
+        tip = frames[n]
         p0 = tip[0, 2] * tool_length + tip[0, 3]
         p1 = tip[1, 2] * tool_length + tip[1, 3]
         p2 = tip[2, 2] * tool_length + tip[2, 3]
-        for j in range(n):  # geometric Jacobian: z_j x (p - o_j) over z_j
-            z0, z1, z2 = frames[j, 0, 2] * sign[j], frames[j, 1, 2] * sign[j], frames[j, 2, 2] * sign[j]
-            r0, r1, r2 = p0 - frames[j, 0, 3], p1 - frames[j, 1, 3], p2 - frames[j, 2, 3]
+        for j in range(n):  # geometric Jacobian: z_j x (p - o_j) over z_j, the joint's world axis and origin
+            f, b = frames[j], before[j]
+            w0 = b[0, 0] * axis[j, 0] + b[0, 1] * axis[j, 1] + b[0, 2] * axis[j, 2]
+            w1 = b[1, 0] * axis[j, 0] + b[1, 1] * axis[j, 1] + b[1, 2] * axis[j, 2]
+            w2 = b[2, 0] * axis[j, 0] + b[2, 1] * axis[j, 1] + b[2, 2] * axis[j, 2]
+            z0 = f[0, 0] * w0 + f[0, 1] * w1 + f[0, 2] * w2
+            z1 = f[1, 0] * w0 + f[1, 1] * w1 + f[1, 2] * w2
+            z2 = f[2, 0] * w0 + f[2, 1] * w1 + f[2, 2] * w2
+            o0 = f[0, 0] * b[0, 3] + f[0, 1] * b[1, 3] + f[0, 2] * b[2, 3] + f[0, 3]
+            o1 = f[1, 0] * b[0, 3] + f[1, 1] * b[1, 3] + f[1, 2] * b[2, 3] + f[1, 3]
+            o2 = f[2, 0] * b[0, 3] + f[2, 1] * b[1, 3] + f[2, 2] * b[2, 3] + f[2, 3]
+            r0, r1, r2 = p0 - o0, p1 - o1, p2 - o2
             jac[0, j] = z1 * r2 - z2 * r1
             jac[1, j] = z2 * r0 - z0 * r2
             jac[2, j] = z0 * r1 - z1 * r0
@@ -166,7 +185,7 @@ def ik_kernel(world_dh0, d, a, ca, sa, offset, sign, lower, upper, tool_length, 
             for i in range(rows):
                 s += jac[i, k] * x[i]
             q[k] = min(max(q[k] + gain * s, lower[k]), upper[k])
-        frames_kernel(world_dh0, d, a, ca, sa, offset, sign, q, frames)
+        frames_kernel(world0, before, axis, after, q, frames)
         _error(frames, tool_length, target_pos, target_rot, rows, rel, error)
         iterations += 1
         norm = np.sqrt(np.sum(error[:rows] * error[:rows]))

@@ -1,8 +1,9 @@
-"""Forward kinematics from the DH table (paper eqs. 1-2), the geometric Jacobian and
-damped-least-squares inverse kinematics (paper Algorithm 1): numpy, the IK iterations compiled.
+"""Forward kinematics over the joint chain (paper eqs. 1-2 for a DH table, the URDF's joints
+otherwise: ``rayreach.robots.chain``), the geometric Jacobian and damped-least-squares inverse
+kinematics (paper Algorithm 1), compiled where it is hot.
 
-Frames are in the world: the robot's base pose and the fixed URDF-to-DH rotation of its
-spec are folded into frame 0, and the tool offset into the end-effector frame, so
+Frames are in the world: the robot's base pose and the chain's root (the fixed URDF-to-DH
+rotation of a DH table) are folded into frame 0, and the tool offset into the end-effector frame, so
 ``Kinematics.fk(q)`` is directly comparable to PyBullet's pose of the tool tip.
 """
 
@@ -12,8 +13,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from rayreach.robots.chain import robot_chain
 from rayreach.robots.spec import RobotSpec
-from rayreach.sim.ik_kernel import ik_kernel
+from rayreach.sim.ik_kernel import frames_kernel, ik_kernel
 from rayreach.sim.transforms import pose_matrix, rpy_to_matrix
 
 
@@ -68,50 +70,29 @@ class Kinematics:
         self.spec = spec
         position = spec.base_position if base_position is None else base_position
         rpy = spec.base_rpy if base_rpy is None else base_rpy
-        world_base = pose_matrix(position, rpy_to_matrix(rpy))
-        self.world_dh0 = world_base @ pose_matrix((0.0, 0.0, 0.0), rpy_to_matrix(spec.dh_base_rpy))
+        self.chain = robot_chain(spec)
+        self.world0 = pose_matrix(position, rpy_to_matrix(rpy)) @ self.chain.root
+        """World pose of frame 0: the base pose, then the chain's root (the DH base rotation)."""
         self.flange_tool = pose_matrix((0.0, 0.0, spec.tool.length), np.eye(3))
-        dh = spec.dh
-        self._d = np.asarray(dh.d, dtype=float)
-        self._a = np.asarray(dh.a, dtype=float)
-        self._ca = np.cos(np.asarray(dh.alpha, dtype=float))
-        self._sa = np.sin(np.asarray(dh.alpha, dtype=float))
-        self._offset = np.asarray(dh.offset, dtype=float)
-        self._sign = np.asarray(dh.sign, dtype=float)
         self.lower = spec.lower_array
         self.upper = spec.upper_array
         self._eye = {3: np.eye(3), 6: np.eye(6)}
-        n = len(self._d)
-        # constant parts of the DH matrices; cos/sin(theta) entries are filled per call
-        self._template = np.zeros((n, 4, 4))
-        self._template[:, 2, 1] = self._sa
-        self._template[:, 2, 2] = self._ca
-        self._template[:, 2, 3] = self._d
-        self._template[:, 3, 3] = 1.0
+        # each joint's axis and origin in the frame before it, for the Jacobian
+        self._joint_axis = np.einsum("nij,nj->ni", self.chain.before[:, :3, :3], self.chain.axis)
+        self._joint_origin = self.chain.before[:, :3, 3].copy()
+
+    @property
+    def base_turn_sign(self) -> float:
+        """+1 when a positive first joint turns the arm counter-clockwise about frame 0's z axis."""
+        return 1.0 if float(self._joint_axis[0] @ np.array([0.0, 0.0, 1.0])) >= 0.0 else -1.0
 
     # ------------------------------------------------------------------ forward kinematics
-    def dh_matrices(self, q: np.ndarray) -> np.ndarray:
-        """The n matrices ``^{i-1}_i T(q_i)`` of paper eq. 2 (standard DH), shape (n, 4, 4)."""
-        theta = self._sign * np.asarray(q, dtype=float) + self._offset
-        ct, st = np.cos(theta), np.sin(theta)
-        m = self._template.copy()
-        m[:, 0, 0] = ct
-        m[:, 0, 1] = -st * self._ca
-        m[:, 0, 2] = st * self._sa
-        m[:, 0, 3] = self._a * ct
-        m[:, 1, 0] = st
-        m[:, 1, 1] = ct * self._ca
-        m[:, 1, 2] = -ct * self._sa
-        m[:, 1, 3] = self._a * st
-        return m
-
     def frames(self, q: np.ndarray) -> np.ndarray:
-        """World poses of DH frames 0..n (frame n is the flange), shape (n + 1, 4, 4)."""
-        local = self.dh_matrices(q)
-        out = np.empty((len(local) + 1, 4, 4))
-        out[0] = self.world_dh0
-        for i in range(len(local)):
-            np.matmul(out[i], local[i], out=out[i + 1])
+        """World poses of frames 0..n (frame n is the flange), shape (n + 1, 4, 4): paper eq. 1
+        over the chain's joints (``rayreach.robots.chain``)."""
+        out = np.empty((self.chain.n_joints + 1, 4, 4))
+        frames_kernel(self.world0, self.chain.before, self.chain.axis, self.chain.after,
+                      np.asarray(q, dtype=float), out)
         return out
 
     def fk(self, q: np.ndarray) -> np.ndarray:
@@ -125,8 +106,10 @@ class Kinematics:
         """Geometric Jacobian (6 x n, linear rows first) of ``point`` (default: the tool tip)."""
         if point is None:
             point = self.ee_from_frames(frames)[:3, 3]
-        z = frames[:-1, :3, 2].T * self._sign  # (3, n): joint axes
-        r = point[:, None] - frames[:-1, :3, 3].T  # (3, n): joint to point
+        rot = frames[:-1, :3, :3]
+        z = np.einsum("nij,nj->in", rot, self._joint_axis)  # (3, n): joint axes in the world
+        origin = np.einsum("nij,nj->in", rot, self._joint_origin) + frames[:-1, :3, 3].T
+        r = point[:, None] - origin  # (3, n): joint to point
         jac = np.empty((6, z.shape[1]))
         jac[0] = z[1] * r[2] - z[2] * r[1]  # z x r, written out: np.cross is slow on tiny arrays
         jac[1] = z[2] * r[0] - z[0] * r[2]
@@ -169,10 +152,10 @@ class Kinematics:
                         position_error=float(result[2]), orientation_error=float(result[3]), frames=frames)
 
     def kernel_args(self, params: IKParams) -> tuple:
-        """The chain and ``params`` as ``ik_kernel`` takes them, up to its target: base pose,
-        DH values, joint limits, tool length, lambda^2, damping scale (-1: none), gain,
+        """The chain and ``params`` as ``ik_kernel`` takes them, up to its target: frame 0's
+        pose, the chain, joint limits, tool length, lambda^2, damping scale (-1: none), gain,
         tolerance and iteration limit."""
         scale = -1.0 if params.damping_scale is None else float(params.damping_scale)
-        return (self.world_dh0, self._d, self._a, self._ca, self._sa, self._offset, self._sign, self.lower,
+        return (self.world0, self.chain.before, self.chain.axis, self.chain.after, self.lower,
                 self.upper, float(self.flange_tool[2, 3]), float(params.damping) ** 2, scale,
                 params.delta_int / params.delta_dif, float(params.tolerance), int(params.max_iterations))
