@@ -11,7 +11,8 @@ import pytest
 
 from exp1_scenes import layers
 from rayreach.acting import ActingEnv
-from rayreach.acting.arm_guard import PAD, PROBE, VOXEL, ArmCapsules, _first_per_cell
+from rayreach.acting.arm_guard import VOXEL, _first_per_cell
+from rayreach.acting.mesh_capsules import PAD, PROBE, ArmCapsules
 from rayreach.sim.geometry import capsule_around
 from rayreach.acting.controller import SHORTER
 from rayreach.acting.layers import ArmRule

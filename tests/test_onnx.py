@@ -123,6 +123,17 @@ def test_planner_graph_folds_clipping_and_its_metadata(cases):
     assert cases["kr16"][1].robot == "kr16"
 
 
+@pytest.mark.parametrize("name", ["ur5", "planner"])
+def test_onnx_sample_draws_as_torch_does(cases, name):
+    """Where the arm was held, the planner draws from the policy's Gaussian: the graph's mean
+    before the clip and the standard deviation in its metadata give torch's draw."""
+    policy, graph, obs = cases[name]
+    for i, o in enumerate(obs[:50]):
+        ours = graph.sample(o, np.random.default_rng(i))
+        assert np.abs(ours - policy.sample(o, np.random.default_rng(i))).max() <= TOLERANCE
+    assert not np.allclose(graph.sample(obs[0], np.random.default_rng(0)), graph.act(obs[0]))
+
+
 def test_onnx_policy_acts_without_torch(cases, tmp_path):
     policy, graph, obs = cases["planner"]
     np.save(tmp_path / "obs.npy", obs[:50])

@@ -7,13 +7,15 @@ from dataclasses import replace
 
 import numpy as np
 
-from rayreach.acting.arm_guard import ArmCapsules, ArmGuard
+from rayreach.acting.arm_guard import ArmGuard, LinkCapsules
+from rayreach.acting.config import ROBOT_RADII, ActingConfig, FinalApproachRadii
 from rayreach.acting.detour import Detour, DetourState
 from rayreach.acting.final_approach import FinalApproach
 from rayreach.acting.pipeline import Command, Component, Episode, Verdict
 from rayreach.acting.shield import SafetyLayer, remembered_rays
 from rayreach.env import rewards as R
 from rayreach.env.perception import Perception
+from rayreach.robots.spec import RobotSpec
 from rayreach.sim.kinematics import IKResult
 
 
@@ -113,16 +115,11 @@ class ArmRule(Component):
 
     name = "arm_guard"
 
-    def __init__(self, capsules: ArmCapsules, layer: SafetyLayer) -> None:
+    def __init__(self, capsules: LinkCapsules, layer: SafetyLayer) -> None:
         self.capsules, self.layer = capsules, layer
-        self.guard: ArmGuard | None = None
-
-    def reset(self, episode: Episode) -> None:
-        layer = self.layer
-        self.guard = ArmGuard(self.capsules, layer.arm_clearance, layer.guard_tool, layer.tool_clearance)
+        self.guard = ArmGuard(capsules, layer.arm_clearance, layer.guard_tool, layer.tool_clearance)
 
     def veto(self, command: Command, ik: IKResult, pose: np.ndarray, now: Perception, episode: Episode) -> Verdict:
-        assert self.guard is not None, "reset() first"
         points = episode.memory.seen_points(self.layer.arm_memory_steps)
         return Verdict.ALLOW if self.guard.allows(now.q, ik.q, points, tool=not command.straight) else Verdict.SHORTER
 
@@ -133,3 +130,33 @@ def applied_final_approach(approach: FinalApproach, ee_step: float, rot_step: fl
     return replace(approach, ee_step=ee_step, rot_step=rot_step, tool_length=tool_length, tool_radius=tool_radius,
                    radius=radius if approach.radius is None else approach.radius,
                    axial_radius=axial_radius if approach.axial_radius is None else approach.axial_radius)
+
+
+def acting_components(config: ActingConfig, spec: RobotSpec, ray_range: float, rewards: R.RewardWeights,
+                      capsules: LinkCapsules | None) -> tuple[list[Component], FinalApproach | None, FinalApproachRadii]:
+    """The pipeline of ``config`` for a robot, in the order the layers act: proposers, then the
+    shield, then the vetoes; with the final approach as applied (the robot's step, tool and
+    radii filled in, ``ROBOT_RADII``) and those radii. ``capsules``: the links the arm's rule
+    keeps clear (its blind links and the tool), needed where ``safety.arm_clearance`` > 0."""
+    safety = config.safety
+    radii = ROBOT_RADII.get(spec.name, FinalApproachRadii())
+    approach = None if config.final_approach is None else applied_final_approach(
+        config.final_approach, spec.ee_step, spec.rot_step, spec.tool.length, spec.tool.radius, radii.radius,
+        radii.axial_radius)
+    components: list[Component] = []
+    if approach is not None:
+        components.append(FinalApproachStep(approach))
+    if config.detour is not None:
+        arrive = radii.radius if approach is None else approach.radius
+        guard = safety.workspace_guard + spec.ee_step  # the grid keeps a step inside the guard
+        components.append(DetourStep(config.detour, safety, spec.tool.length, spec.tool.radius, arrive, ray_range,
+                                     guard))
+    if approach is not None and approach.stall_steps > 0:
+        components.append(StallNudge(approach))
+    components.append(Shield(safety, rewards))
+    if safety.arm_clearance > 0:
+        if capsules is None:
+            raise ValueError("the arm's rule (safety.arm_clearance > 0) needs the links' capsules; "
+                             "or switch it off: ActingConfig().without('arm_guard')")
+        components.append(ArmRule(capsules, safety))
+    return components, approach, radii

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from enum import Enum
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
@@ -22,6 +22,13 @@ from rayreach.sim.kinematics import IKResult
 
 if TYPE_CHECKING:
     from rayreach.acting.shield import SafetyLayer
+
+
+SHORTER = (0.5, 0.25, 0.125)
+"""Shares of a step the arm's rule refused that are tried in turn, the longest first: a
+shorter step may keep every blind link outside the rule's clearance (a deterministic policy
+would repeat the refused step, held, until its step budget ran out: a KR16 tool stopped
+0.5 mm short of the goal's tolerance)."""
 
 
 class Verdict(Enum):
@@ -85,3 +92,57 @@ class Component:
     def veto(self, command: Command, ik: IKResult, pose: np.ndarray, now: Perception, episode: Episode) -> Verdict:
         """Whether the arm may take ``ik``'s solution (tool ``pose``, 4 x 4) for ``command``."""
         return Verdict.ALLOW
+
+
+@dataclass
+class Chosen:
+    """What the pipeline made of one action."""
+
+    command: Command
+    proposed: str
+    """The source of the command before the shield reshaped it."""
+    shaped: float
+    """The shield's reward term."""
+    ik: IKResult
+    """The IK solution of the step tried last."""
+    taken: bool
+    """Whether the arm may take ``ik``'s solution (else it holds still)."""
+
+
+def choose(components: list[Component], episode: Episode, action: np.ndarray,
+           solve: Callable[[np.ndarray, bool], IKResult], tool_pose: Callable[[IKResult], np.ndarray]) -> Chosen:
+    """One step of the pipeline on ``action`` (6, action units): the first proposal wins over
+    the action, every component reshapes the pose step, then IK (``solve(delta,
+    keep_orientation)``) and the vetoes, with the shorter shares where a veto asks for them.
+    Moves nothing: the caller takes ``ik`` or holds the arm (``ActingEnv`` in simulation,
+    ``ArmController`` on a real arm)."""
+    now = episode.memory.now
+    command = Command(action, "policy")
+    for component in components:
+        proposed = component.propose(now, episode)
+        if proposed is not None:
+            command = proposed
+            break
+    command.delta = np.clip(command.action, -1.0, 1.0) * episode.step_scale
+    source = command.source
+    shaped = sum(component.reshape(command, now, episode) for component in components)
+
+    def attempt(delta: np.ndarray) -> tuple[IKResult, Verdict]:
+        ik = solve(delta, True)
+        if not ik.converged and command.straight:
+            # the final approach moves the tip and keeps the tool's orientation only where IK
+            # can: a pose out of its reach stopped a KR16 tool 8 cm short of its goal for good
+            ik = solve(delta, False)
+        pose = tool_pose(ik)
+        for component in components:
+            verdict = component.veto(command, ik, pose, now, episode)
+            if verdict is not Verdict.ALLOW:
+                return ik, verdict
+        return ik, Verdict.ALLOW
+
+    ik, verdict = attempt(command.delta)
+    for share in SHORTER if verdict is Verdict.SHORTER else ():
+        ik, verdict = attempt(command.delta * share)
+        if verdict is Verdict.ALLOW:
+            break
+    return Chosen(command, source, shaped, ik, verdict is Verdict.ALLOW)

@@ -33,6 +33,13 @@ from dataclasses import dataclass
 import gymnasium as gym
 import numpy as np
 
+from rayreach.sim.sensors import N_RAYS
+from rayreach.sim.transforms import matrix_to_rpy
+
+N_ROBOT_OBS = 13
+"""The paper's values before the rays: joints, goal offset, orientation, distance."""
+OBS_SIZE = N_ROBOT_OBS + N_RAYS
+"""The paper's observation (``rayreach.env.reach``'s table)."""
 NEAR = 0.05
 """Goal offsets up to this, m, span the whole [-1, 1] of the fine offset."""
 WALL_RANGE = 0.3
@@ -40,6 +47,20 @@ WALL_RANGE = 0.3
 the rays see obstacles, and a larger user workspace looks like the training one."""
 SCAN_OFFSET_RANGE = 1.0
 """Bound on a remembered scan's end-effector offset, m (for the observation space)."""
+
+
+def paper_observation(q: np.ndarray, goal: np.ndarray, ee_pos: np.ndarray, ee_rot: np.ndarray,
+                      ref_rot_t: np.ndarray, distance: float, rays: np.ndarray) -> np.ndarray:
+    """The paper's 142 values: joints, goal minus end effector, the tool's orientation relative
+    to its start (``ref_rot_t`` the start's rotation transposed) as roll-pitch-yaw, the
+    distance, the ray fractions."""
+    obs = np.empty(OBS_SIZE, dtype=np.float32)
+    obs[0:6] = q
+    obs[6:9] = goal - ee_pos
+    obs[9:12] = matrix_to_rpy(ref_rot_t @ ee_rot)
+    obs[12] = distance
+    obs[N_ROBOT_OBS:] = rays
+    return obs
 
 
 @dataclass(frozen=True)

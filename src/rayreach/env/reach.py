@@ -63,20 +63,18 @@ import gymnasium as gym
 import numpy as np
 
 from rayreach.env import rewards as R
-from rayreach.env.observation import ObservationConfig, Observer
+from rayreach.env.observation import N_ROBOT_OBS, OBS_SIZE, ObservationConfig, Observer, paper_observation  # noqa: F401
 from rayreach.env.perception import Perception
 from rayreach.robots import ROBOTS, RobotSpec, get_robot
 from rayreach.scenarios import RANDOM, WORLD_SUITES, Scenario, ScenarioError, get_scenario
 from rayreach.scenarios.feasibility import solve_start, validate
 from rayreach.scenarios.random_world import RandomWorldConfig
 from rayreach.scenarios.suites import suite_workspace, world_sampler
-from rayreach.sim.kinematics import IKParams, IKResult, Kinematics
+from rayreach.sim.kinematics import STEP_IK, IKParams, IKResult, Kinematics
 from rayreach.sim.scene import Scene
 from rayreach.sim.sensors import N_RAYS, RAY_RANGE, RayModel
-from rayreach.sim.transforms import matrix_to_rpy, rotvec_to_matrix
+from rayreach.sim.transforms import rotvec_to_matrix
 
-N_ROBOT_OBS = 13
-OBS_SIZE = N_ROBOT_OBS + N_RAYS
 REWARD_TERM_NAMES = ("success", "collision", "distance", "shaking", "out_of_bounds", "exhausted", "progress",
                      "proximity")
 """The reward terms of a step, in the order they are summed (``info["reward_terms"]``)."""
@@ -100,9 +98,8 @@ class EnvConfig:
     ray_backend: str = "auto"
     """``auto`` (numpy when every obstacle is a primitive), ``numpy`` or ``bullet``."""
     ray_range: float = RAY_RANGE
-    ik: IKParams = IKParams(tolerance=1e-4, max_iterations=10)
-    """IK per step: 0.1 mm is ample for a 5 mm step, which one iteration nearly always reaches
-    (the damping shrinks for small errors); an unconverged step still moves (``info["ik_converged"]``)."""
+    ik: IKParams = STEP_IK
+    """IK per step (``info["ik_converged"]`` tells whether it met its tolerance)."""
     rewards: R.RewardWeights = R.RewardWeights()
     random_world: RandomWorldConfig = field(default_factory=RandomWorldConfig)
     observation: ObservationConfig = ObservationConfig()
@@ -406,13 +403,8 @@ class ReachEnv(gym.Env):
 
     def _observation(self, distance: float, rays: np.ndarray) -> np.ndarray:
         """The paper's 142 values."""
-        obs = np.empty(OBS_SIZE, dtype=np.float32)
-        obs[0:6] = self.q
-        obs[6:9] = self.goals[self.goal_index] - self.ee_pos
-        obs[9:12] = matrix_to_rpy(self.ref_rot_t @ self.ee_rot)
-        obs[12] = distance
-        obs[N_ROBOT_OBS:] = rays
-        return obs
+        return paper_observation(self.q, self.goals[self.goal_index], self.ee_pos, self.ee_rot, self.ref_rot_t,
+                                 distance, rays)
 
     # ------------------------------------------------------------------ rendering
     def render(self):

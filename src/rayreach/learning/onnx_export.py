@@ -31,17 +31,22 @@ if TYPE_CHECKING:
 
 INPUT = "observation"
 OUTPUT = "action"
+MEAN = "mean"
+"""Second output: the Gaussian's mean before the clip, which ``OnnxPolicy.sample`` draws round."""
 DEFAULT_OPSET = 17
-ONNX_FORMAT = 1
+ONNX_FORMAT = 2
 """Version of the metadata layout below (``rayreach.format``)."""
-META_KEYS = ("robot", "kind", "obs_shape", "observation", "timesteps", "action_low", "action_high", "source")
+META_KEYS = ("robot", "kind", "obs_shape", "observation", "timesteps", "action_low", "action_high", "action_std",
+             "source")
 """metadata_props written as ``rayreach.<key>``, each a JSON value."""
 
 
 def export_onnx(policy_or_path: Any, out_path: str | Path, opset: int = DEFAULT_OPSET) -> Path:
     """Write ``policy_or_path`` (a ``Policy``, a bundle or a run directory) to ``out_path`` as
     one ONNX graph ``observation`` (batch x obs_size, float32, the env's raw observation) ->
-    ``action`` (batch x 6, float32), the deterministic action. Written atomically."""
+    ``action`` (batch x 6, float32), the deterministic action, and ``mean``, the same before
+    the clip; the Gaussian's standard deviation (state-independent) goes into the metadata.
+    Written atomically."""
     import copy
 
     import onnx
@@ -81,12 +86,12 @@ def export_onnx(policy_or_path: Any, out_path: str | Path, opset: int = DEFAULT_
             self.register_buffer("low", torch.as_tensor(np.asarray(space.low, dtype=np.float32)))
             self.register_buffer("high", torch.as_tensor(np.asarray(space.high, dtype=np.float32)))
 
-        def forward(self, obs: torch.Tensor) -> torch.Tensor:
+        def forward(self, obs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
             if self.normalize:
                 x = (obs.to(torch.float64) - self.mean) / self.std
                 obs = torch.clamp(x, -self.clip, self.clip).to(torch.float32)
             mean = self.mean_net(self.head(self.features(obs)))
-            return torch.maximum(torch.minimum(mean, self.high), self.low)
+            return torch.maximum(torch.minimum(mean, self.high), self.low), mean
 
     actor = Actor().eval()
     out_path = Path(out_path)
@@ -99,14 +104,17 @@ def export_onnx(policy_or_path: Any, out_path: str | Path, opset: int = DEFAULT_
             # onnxscript, and this graph is plain layers
             warnings.simplefilter("ignore", DeprecationWarning)
             torch.onnx.export(actor, (torch.zeros(1, obs_size),), tmp, input_names=[INPUT],
-                              output_names=[OUTPUT], dynamic_axes={INPUT: {0: "batch"}, OUTPUT: {0: "batch"}},
+                              output_names=[OUTPUT, MEAN],
+                              dynamic_axes={INPUT: {0: "batch"}, OUTPUT: {0: "batch"}, MEAN: {0: "batch"}},
                               opset_version=opset, dynamo=False)
         model = onnx.load(tmp)
         meta = policy.meta
         values = {"robot": policy.robot, "kind": meta.get("kind"), "obs_shape": [obs_size],
                   "observation": meta.get("config", {}).get("observation") or {},
                   "timesteps": meta.get("timesteps"), "action_low": space.low.tolist(),
-                  "action_high": space.high.tolist(), "source": str(policy.path)}
+                  "action_high": space.high.tolist(),
+                  "action_std": torch.exp(sb3.log_std.detach()).numpy().astype(float).tolist(),
+                  "source": str(policy.path)}
         del model.metadata_props[:]
         onnx.helper.set_model_props(model, {"rayreach.format": str(ONNX_FORMAT),
                                             **{f"rayreach.{k}": json.dumps(v) for k, v in values.items()}})
@@ -172,3 +180,14 @@ class OnnxPolicy:
                              f"got shape {obs.shape}")
         action = self.session.run([OUTPUT], {INPUT: batch})[0]
         return action[0] if single else action
+
+    def sample(self, obs: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """An action drawn from the policy's Gaussian with ``rng``, clipped to the action
+        space, as ``Policy.sample`` draws it (``ActingPolicy`` draws where the arm was held)."""
+        obs = np.asarray(obs, dtype=np.float32).reshape(1, -1)
+        if obs.shape[1] != self.obs_size:
+            raise ValueError(f"{self.path}: expected observations of {self.obs_size} values, got {obs.shape[1]}")
+        mean = self.session.run([MEAN], {INPUT: obs})[0][0]
+        std = np.asarray(self.meta["action_std"], dtype=np.float32)
+        low, high = (np.asarray(self.meta[k], dtype=np.float32) for k in ("action_low", "action_high"))
+        return np.clip(mean + std * rng.standard_normal(mean.shape), low, high).astype(np.float32)

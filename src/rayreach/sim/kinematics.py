@@ -45,6 +45,11 @@ class IKParams:
     """Give up (status ``converged=False``) after this many iterations."""
 
 
+STEP_IK = IKParams(tolerance=1e-4, max_iterations=10)
+"""IK per control step: 0.1 mm is ample for a 5 mm step, which one iteration nearly always
+reaches (the damping shrinks for small errors); an unconverged step still moves."""
+
+
 @dataclass(frozen=True)
 class IKResult:
     q: np.ndarray

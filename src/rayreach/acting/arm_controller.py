@@ -1,0 +1,223 @@
+"""``ArmController``: the planner on a real arm. Joint angles, the goal and the 129 ray readings
+go in; the next joint target comes out, with the acting layers applied. No simulator.
+
+The controller runs what ``ActingEnv`` runs in simulation, the same pipeline
+(``rayreach.acting.pipeline.choose``) on the same perception: the rays placed by the joint
+chain's forward kinematics (``rayreach.sim.sensors``, the layout of docs/rays.md), the
+readings as hit fractions, the policy's observation. Two things differ, both because there is
+no simulated scene: the arm's rule measures the seen points against capsules round the links
+(``rayreach.acting.arm_guard.ChainCapsules``, shipped per robot) instead of PyBullet's
+meshes, which never lets a link nearer than the meshes would; and the episode has no
+collision test, which the real arm's own safety provides.
+
+    controller = ArmController("path/to/ur5.onnx")          # or a Policy, or a model .zip
+    controller.reset(q_now, goal)
+    while True:
+        step = controller.step(q_now, readings)              # 129 fractions (or unit="m")
+        if step.reached or step.outside:
+            break
+        send_joint_target(step.q_target); q_now = read_joints(); readings = read_rays()
+
+The policy may be an ``OnnxPolicy`` (onnxruntime, no torch) or a ``Policy``; anything with
+``robot``, ``observation``, ``act(obs)`` and ``sample(obs, rng)`` will do.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from rayreach.acting.arm_guard import ChainCapsules
+from rayreach.acting.config import ActingConfig
+from rayreach.acting.layers import acting_components
+from rayreach.acting.memory import RayMemory
+from rayreach.acting.pipeline import Episode, choose
+from rayreach.acting.resample import ActingPolicy
+from rayreach.env.observation import OBS_SIZE, Observer, paper_observation
+from rayreach.env.perception import Perception
+from rayreach.env.rewards import RewardWeights
+from rayreach.robots import RobotSpec, get_robot
+from rayreach.robots.urdf import TOOL_LINK
+from rayreach.sim.kinematics import STEP_IK, IKParams, IKResult, Kinematics
+from rayreach.sim.sensors import N_RAYS, RAY_RANGE, RayModel
+from rayreach.sim.transforms import rotvec_to_matrix
+
+UNITS = ("fraction", "m")
+"""How ray readings may come: hit fractions of the range in [0, 1], or metres."""
+
+_FIRST = np.array([0])
+
+
+@dataclass(frozen=True)
+class ControlStep:
+    """One control step's answer."""
+
+    q_target: np.ndarray
+    """The joint angles to command next, rad (6,); the measured ones where the arm holds."""
+    source: str
+    """What chose the motion (``rayreach.acting.SOURCES``), or ``reached`` / ``outside``."""
+    held: bool
+    """The arm is to hold still this step."""
+    distance: float
+    """Tool tip to goal, m, as measured this step."""
+    reached: bool
+    """The tip is within the goal tolerance: the query is done."""
+    outside: bool
+    """The tip has left the workspace: the controller holds the arm and the query has failed."""
+
+
+def load_controller_policy(policy: Any) -> Any:
+    """A policy object as ``ArmController`` takes it: an ``.onnx`` path loads on onnxruntime, a
+    robot name or a ``.zip`` with torch (``rayreach.planners.drl.resolve_model``); an object
+    passes through."""
+    if not isinstance(policy, (str, Path)):
+        return policy
+    if str(policy).endswith(".onnx"):
+        from rayreach.learning.onnx_export import OnnxPolicy
+
+        return OnnxPolicy(policy)
+    from rayreach.learning.policy import load_policy
+    from rayreach.planners.drl import resolve_model
+
+    return load_policy(resolve_model(policy))
+
+
+class ArmController:
+    """The planner for one arm: a policy and the acting layers of ``acting``.
+
+    ``robot`` defaults to the policy's; ``base_position``/``base_rpy`` place the arm's base in
+    the frame the goal and workspace are given in (default: the robot's spec). ``capsules``
+    are the links the arm's rule keeps clear (default: the shipped ones of the robot).
+    """
+
+    def __init__(self, policy: Any, robot: str | RobotSpec | None = None, acting: ActingConfig = ActingConfig(),
+                 *, goal_tolerance: float = 0.01, ray_range: float = RAY_RANGE,
+                 base_position: tuple[float, float, float] | None = None,
+                 base_rpy: tuple[float, float, float] | None = None, ik: IKParams = STEP_IK,
+                 capsules: ChainCapsules | None = None, seed: int = 0) -> None:
+        self.policy = load_controller_policy(policy)
+        self.spec = get_robot(robot if robot is not None else self.policy.robot)
+        if self.spec.name != self.policy.robot:
+            raise ValueError(f"the policy was trained for '{self.policy.robot}', not '{self.spec.name}'")
+        if not goal_tolerance > 0:
+            raise ValueError(f"goal_tolerance must be positive, got {goal_tolerance}")
+        self.kin = Kinematics(self.spec, base_position, base_rpy)
+        self.rays = RayModel(self.spec, ray_range)
+        self.ray_range, self.goal_tolerance, self.ik = float(ray_range), float(goal_tolerance), ik
+        self.acting = acting
+        if capsules is None and acting.safety.arm_clearance > 0:
+            capsules = ChainCapsules.shipped(self.kin, (*self.spec.blind_links, TOOL_LINK))
+        self.components, self.final_approach, _ = acting_components(acting, self.spec, self.ray_range,
+                                                                    RewardWeights(), capsules)
+        self.actor = ActingPolicy(self.policy, deterministic=True, resample=acting.resample)
+        self.observer = Observer(self.policy.observation, 1, N_RAYS, OBS_SIZE, self.spec.ee_step)
+        self.step_scale = np.array([self.spec.ee_step] * 3 + [self.spec.rot_step] * 3)
+        self.seed = seed
+        self._goal: np.ndarray | None = None
+
+    # ------------------------------------------------------------------ a query
+    def reset(self, q: np.ndarray, goal: np.ndarray, workspace_low: np.ndarray | None = None,
+              workspace_high: np.ndarray | None = None) -> None:
+        """Start a query from joints ``q`` (rad) to ``goal`` (m, base frame of the spec's
+        placement) inside the workspace box (default: the robot's training workspace)."""
+        self._q_checked(q)
+        goal = self._vector(goal, 3, "goal")
+        low = self._vector(self.spec.workspace_low if workspace_low is None else workspace_low, 3, "workspace_low")
+        high = self._vector(self.spec.workspace_high if workspace_high is None else workspace_high, 3,
+                            "workspace_high")
+        if not np.all(low < high):
+            raise ValueError(f"workspace_low {low.tolist()} must lie below workspace_high {high.tolist()} on every axis")
+        self._goal, self._low, self._high = goal, low, high
+        self._episode: Episode | None = None
+        self._steps = 0
+        self._held = False
+        self._taken = True
+        self.actor.reset(self.seed)
+
+    def step(self, q: np.ndarray, readings: np.ndarray, unit: str = "fraction") -> ControlStep:
+        """The next joint target from the measured joints ``q`` (rad) and the 129 ray
+        ``readings`` (``unit``: ``fraction`` of the range, 1 for nothing seen, or ``m``, where
+        anything at or beyond the range reads as nothing seen)."""
+        if self._goal is None:
+            raise RuntimeError("call reset(q, goal) before step()")
+        q = self._q_checked(q)
+        fractions = self._fractions(readings, unit)
+        frames = self.kin.frames(q)
+        ee = self.kin.ee_from_frames(frames)
+        ee_pos, ee_rot = ee[:3, 3].copy(), ee[:3, :3].copy()
+        origins, directions = self.rays.world_rays(frames)
+        now = Perception(step=self._steps, q=q, ee_position=ee_pos, ee_rotation=ee_rot, goal=self._goal,
+                         origins=origins, directions=directions, lengths=fractions * self.ray_range,
+                         fractions=fractions, workspace_low=self._low, workspace_high=self._high)
+        distance = float(np.linalg.norm(self._goal - ee_pos))
+        first = self._episode is None
+        if first:
+            self._ref_rot_t = ee_rot.T.copy()
+        base = paper_observation(q, self._goal, ee_pos, ee_rot, self._ref_rot_t, distance, fractions)[None]
+        args = (_FIRST, base, ee_pos[None], fractions[None], self._low[None], self._high[None])
+        if first:
+            memory = RayMemory()
+            memory.add(now, moved=True)
+            self._episode = Episode(memory, [distance], self.step_scale)
+            for component in self.components:
+                component.reset(self._episode)
+            self.observer.reset(*args)
+        else:
+            self._episode.memory.add(now, moved=self._taken)
+            self._episode.distances.append(distance)
+            self.observer.step(*args)
+        self._steps += 1
+        reached = distance < self.goal_tolerance
+        outside = bool(np.any(ee_pos < self._low) or np.any(ee_pos > self._high))
+        if reached or outside:
+            return ControlStep(q.copy(), "reached" if reached else "outside", True, distance, reached, outside)
+
+        action = self.actor.act(self.observer.obs[0].copy(), {"acting": {"held": self._held}})
+
+        def solve(delta: np.ndarray, keep_orientation: bool) -> IKResult:
+            rotation = rotvec_to_matrix(delta[3:]) @ ee_rot if keep_orientation else None
+            return self.kin.ik(ee_pos + delta[:3], rotation, q, self.ik, start_frames=frames)
+
+        chosen = choose(self.components, self._episode, np.asarray(action, dtype=float).reshape(6), solve,
+                        lambda ik: self.kin.ee_from_frames(ik.frames))
+        target = chosen.ik.q.copy() if chosen.taken else q.copy()
+        self._taken = chosen.taken
+        self._held = not chosen.taken or np.array_equal(target, q)
+        return ControlStep(target, "held" if self._held else chosen.command.source, self._held, distance, False,
+                           False)
+
+    # ------------------------------------------------------------------ checks
+    def _vector(self, value: Any, n: int, name: str) -> np.ndarray:
+        v = np.asarray(value, dtype=float).reshape(-1)
+        if v.shape != (n,) or not np.all(np.isfinite(v)):
+            raise ValueError(f"{name} must be {n} finite numbers, got {np.asarray(value).tolist()}")
+        return v
+
+    def _q_checked(self, q: Any) -> np.ndarray:
+        q = self._vector(q, self.spec.n_joints, f"q (joint angles of {', '.join(self.spec.joint_names)}, rad)")
+        outside = np.flatnonzero((q < self.kin.lower - 1e-9) | (q > self.kin.upper + 1e-9))
+        if outside.size:
+            names = ", ".join(f"{self.spec.joint_names[i]}={q[i]:.3f} not in [{self.kin.lower[i]:.3f}, "
+                              f"{self.kin.upper[i]:.3f}]" for i in outside)
+            raise ValueError(f"joint angles outside the robot's limits: {names}")
+        return q
+
+    def _fractions(self, readings: Any, unit: str) -> np.ndarray:
+        if unit not in UNITS:
+            raise ValueError(f"unknown unit '{unit}'; valid: {', '.join(UNITS)}")
+        r = np.asarray(readings, dtype=float).reshape(-1)
+        if r.shape != (N_RAYS,):
+            raise ValueError(f"readings must hold the {N_RAYS} rays in the layout's order (docs/rays.md), got "
+                             f"{np.asarray(readings).shape}")
+        if not np.all(np.isfinite(r)) or np.any(r < 0):
+            bad = np.flatnonzero(~np.isfinite(r) | (r < 0))
+            raise ValueError(f"ray readings must be finite and >= 0; rays {bad.tolist()[:10]} are not")
+        if unit == "m":
+            return np.minimum(r / self.ray_range, 1.0)
+        if np.any(r > 1.0):
+            raise ValueError(f"fractions must lie in [0, 1] (1: nothing within {self.ray_range} m); rays "
+                             f"{np.flatnonzero(r > 1.0).tolist()[:10]} exceed 1 (metres? pass unit='m')")
+        return r

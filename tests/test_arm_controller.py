@@ -1,0 +1,167 @@
+"""``ArmController``, the planner on a real arm: the same steps as ``ActingEnv`` on the same
+readings, the arm's rule on capsules held to PyBullet's, no simulator or torch needed, and
+clear errors for bad readings."""
+
+from __future__ import annotations
+
+import json
+import re
+import subprocess
+import sys
+from importlib import resources
+
+import numpy as np
+import pytest
+
+from rayreach.acting import ActingConfig, ActingEnv, ActingPolicy, ArmController
+from rayreach.acting.arm_guard import CAPSULE_FILE, ChainCapsules
+from rayreach.acting.mesh_capsules import PAD, ArmCapsules, capsule_table
+from rayreach.env.reach import ReachEnv
+from rayreach.learning.onnx_export import export_onnx
+from rayreach.learning.policy import load_policy
+from rayreach.planners.drl import shipped_model
+from rayreach.robots.urdf import TOOL_LINK
+
+
+@pytest.mark.parametrize("robot, scenario", [("ur5", "exp1"), ("kr16", "exp4")])
+def test_controller_commands_what_the_acting_env_does(robot, scenario):
+    """Fed each step's joints and ray fractions from the simulation, the controller's target is
+    the joints the simulated arm moves to, step for step (the arm's rule off: it measures
+    capsules here and meshes there)."""
+    config = ActingConfig().without("arm_guard")
+    policy = load_policy(shipped_model(robot))
+    env = ActingEnv(ReachEnv(robot=robot, scenario=scenario), config)
+    try:
+        actor = ActingPolicy(policy, resample=config.resample)
+        actor.reset(0)
+        obs, info = env.reset(seed=0)
+        reach = env.unwrapped
+        world = reach.scenario
+        controller = ArmController(policy, acting=config, base_position=world.base_position, base_rpy=world.base_rpy)
+        controller.reset(reach.q, reach.goals[0], world.workspace_low, world.workspace_high)
+        sources = set()
+        for _ in range(400):
+            step = controller.step(reach.q.copy(), reach._ray_fractions.copy())
+            obs, _, terminated, truncated, info = env.step(actor.act(obs, info))
+            np.testing.assert_allclose(step.q_target, reach.q, atol=1e-12)
+            assert step.source == info["acting"]["source"]
+            sources.add(step.source)
+            if terminated or truncated:
+                break
+        assert info["is_success"] and {"policy", "final_approach"} <= sources
+        done = controller.step(reach.q.copy(), reach._ray_fractions.copy())
+        assert done.reached and done.held and np.array_equal(done.q_target, reach.q)
+    finally:
+        env.close()
+
+
+def test_shipped_capsules_are_a_fresh_fit():
+    """The package's capsule file is what fitting the collision meshes gives now."""
+    shipped = json.loads(resources.files("rayreach.models").joinpath(CAPSULE_FILE).read_text())
+    fresh = capsule_table()
+    assert shipped.keys() == fresh.keys() == {"ur5", "kr16", "ur10"}
+    for robot, rows in fresh.items():
+        assert [r["link"] for r in shipped[robot]] == [r["link"] for r in rows]
+        for ours, theirs in zip(shipped[robot], rows):
+            assert ours["frame"] == theirs["frame"]
+            np.testing.assert_allclose(ours["ends"], theirs["ends"], atol=1e-6)
+            assert ours["radius"] == pytest.approx(theirs["radius"], abs=1e-6)
+
+
+@pytest.mark.parametrize("robot", ["ur5", "kr16", "ur10"])
+def test_chain_capsules_sit_where_pybullet_puts_the_links_and_never_read_farther(robot, rigs):
+    """Placed by the chain's kinematics, the capsules lie where PyBullet's link states put them;
+    a point's distance to a capsule is at most PyBullet's distance to the mesh inside (less
+    its padding), so the rule on capsules refuses whatever the rule on meshes refuses."""
+    rig = rigs[robot]
+    links = (*rig.spec.blind_links, TOOL_LINK)
+    chain, mesh = ChainCapsules.shipped(rig.kin, links), ArmCapsules(rig.scene, links)
+    rng = np.random.default_rng(4)
+    nearer = 0
+    for _ in range(20):
+        q = np.asarray(rig.spec.home) + rng.uniform(-0.8, 0.8, 6)
+        ends, mesh_ends = chain.pose(q), mesh.pose(q)
+        np.testing.assert_allclose(ends[0], mesh_ends[0], atol=1e-6)
+        np.testing.assert_allclose(ends[1], mesh_ends[1], atol=1e-6)
+        k = rng.integers(len(links))
+        points = (ends[0][k] + rng.uniform(0, 1) * (ends[1][k] - ends[0][k])
+                  + rng.normal(0, 1, (40, 3)) * (chain.radii[k] + 0.02))
+        for point in points:
+            ours = chain.clearance(point[None], 0.05, ends)
+            theirs = mesh.clearance(point[None], 0.05, mesh_ends)
+            assert ours <= theirs + PAD
+            nearer += ours < theirs - 0.005
+    assert nearer > 0  # the capsules are the coarser measure: the comparison can tell them apart
+
+
+def test_controller_needs_neither_pybullet_nor_torch(tmp_path):
+    """On onnxruntime and numpy alone, the controller takes a UR5 from home to a goal 12 cm off
+    in an empty cell (every ray reads 1), the arm following each target."""
+    graph = export_onnx(shipped_model("ur5"), tmp_path / "ur5.onnx")
+    code = f"""
+import sys
+for name in ("pybullet", "torch", "stable_baselines3"):
+    sys.modules[name] = None  # any import of these now fails
+import numpy as np
+from rayreach.acting import ArmController
+from rayreach.robots import get_robot
+controller = ArmController({str(graph)!r})
+q = np.array(get_robot("ur5").home)
+tip = controller.kin.fk(q)[:3, 3]
+controller.reset(q, tip + np.array([0.08, 0.05, -0.07]))
+for n in range(600):
+    step = controller.step(q, np.ones(129))
+    if step.reached or step.outside:
+        break
+    q = step.q_target
+print(step.reached, step.outside, n, round(step.distance, 4))
+"""
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    reached, outside, steps, distance = done.stdout.split()[-4:]
+    assert (reached, outside) == ("True", "False") and float(distance) < 0.01 and int(steps) < 600
+
+
+@pytest.fixture(scope="module")
+def controller():
+    made = ArmController("ur5")
+    made.reset(made.spec.home, [0.0, 0.5, 0.3])
+    return made
+
+
+def test_controller_takes_metres_as_well_as_fractions(controller):
+    home = np.asarray(controller.spec.home)
+    controller.reset(home, [0.0, 0.5, 0.3])
+    in_fractions = controller.step(home, np.full(129, 0.5))
+    controller.reset(home, [0.0, 0.5, 0.3])
+    in_metres = controller.step(home, np.full(129, 0.5 * controller.ray_range), unit="m")
+    np.testing.assert_array_equal(in_fractions.q_target, in_metres.q_target)
+    assert controller._fractions(np.full(129, 7.0), "m").tolist() == [1.0] * 129  # beyond the range: nothing seen
+
+
+@pytest.mark.parametrize("readings, unit, message", [
+    (np.ones(128), "fraction", "readings must hold the 129 rays"),
+    (np.full(129, 0.3) + np.eye(129)[5], "fraction", "rays [5] exceed 1 (metres? pass unit='m')"),
+    (np.r_[np.ones(128), np.nan], "fraction", "rays [128] are not"),
+    (-np.ones(129), "m", "must be finite and >= 0"),
+    (np.ones(129), "feet", "unknown unit 'feet'; valid: fraction, m"),
+])
+def test_controller_refuses_bad_readings_saying_what_is_valid(controller, readings, unit, message):
+    with pytest.raises(ValueError, match=re.escape(message)):
+        controller.step(controller.spec.home, readings, unit=unit)
+
+
+def test_controller_refuses_bad_joints_goals_and_order():
+    made = ArmController("ur5")
+    with pytest.raises(RuntimeError, match=r"call reset\(q, goal\) before step\(\)"):
+        made.step(made.spec.home, np.ones(129))
+    q = np.array(made.spec.home)
+    q[2] = 4.0
+    with pytest.raises(ValueError, match=r"elbow_joint=4.000 not in \[-3.142, 3.142\]"):
+        made.reset(q, [0.0, 0.5, 0.3])
+    with pytest.raises(ValueError, match="goal must be 3 finite numbers"):
+        made.reset(made.spec.home, [0.0, 0.5])
+    with pytest.raises(ValueError, match="workspace_low .* must lie below workspace_high"):
+        made.reset(made.spec.home, [0.0, 0.5, 0.3], [0, 0, 0], [1, -1, 1])
+    with pytest.raises(ValueError, match="trained for 'ur5', not 'kr16'"):
+        ArmController("ur5", robot="kr16")
