@@ -13,6 +13,7 @@ tolerance. Head-on cases are compared at 1e-6.
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
@@ -426,3 +427,24 @@ def test_caster_selection(ur5_scene, tmp_path):
         ur5_scene.caster("numpy")
     got = _cast(ur5_scene, "auto", CENTRE + [0, 0, 0.25], [0, 0, -1])
     assert got == pytest.approx(0.2 / RAY_RANGE, abs=0.01)  # a mesh's convex hull keeps a small margin
+
+
+@pytest.mark.parametrize("robot", ["ur5", "kr16", "ur10"])
+def test_the_printed_layout_is_the_one_the_rays_are_cast_from(robot, rigs, capsys, tmp_path):
+    """``rayreach rays --json`` (docs/rays.md): each ray's origin and direction in the flange
+    frame, carried by the flange's pose, are the ray ``RayModel`` casts; the picture is drawn."""
+    from rayreach.cli import main
+
+    assert main(["rays", "--robot", robot, "--json", "--plot", str(tmp_path / "rays.png")]) == 0
+    rows = json.loads(capsys.readouterr().out)
+    assert [r["index"] for r in rows] == list(range(129))
+    assert [r["sensor"] for r in rows] == ["wrist"] * 24 + ["wraparound"] * 80 + ["tip"] * 25
+    assert (tmp_path / "rays.png").stat().st_size > 10_000
+    rig = rigs[robot]
+    frames = rig.kin.frames(rig.random_q(np.random.default_rng(8)))
+    origins, directions = rig.rays.world_rays(frames)
+    flange = frames[6]
+    np.testing.assert_allclose(np.array([r["origin_flange"] for r in rows]) @ flange[:3, :3].T + flange[:3, 3],
+                               origins, atol=2e-6)
+    np.testing.assert_allclose(np.array([r["direction_flange"] for r in rows]) @ flange[:3, :3].T, directions,
+                               atol=2e-6)

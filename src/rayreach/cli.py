@@ -287,6 +287,11 @@ def build_parser() -> argparse.ArgumentParser:
     robots = sub.add_parser("robots", help="the robots: URDF package, joints, shipped policy, Gymnasium id")
     robots.add_argument("--json", action="store_true", help="print one JSON list")
 
+    rays = sub.add_parser("rays", help="the 129 rays a real arm mounts or emulates: order, mount, frame, origin, direction")
+    rays.add_argument("--robot", default="ur5", help=ROBOT_HELP)
+    rays.add_argument("--json", action="store_true", help="print one JSON list, one object per ray")
+    rays.add_argument("--plot", type=Path, default=None, metavar="PNG", help="also draw the layout to this file")
+
     demo = sub.add_parser("demo", help="a scripted episode on exp1, drawn to a PNG")
     demo.add_argument("--scenario", default="exp1")
     demo.add_argument("--out", default="demo", help="output directory")
@@ -324,6 +329,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _demo(args)
         if args.command == "robots":
             return _robots(args)
+        if args.command == "rays":
+            return _rays(args)
         if args.command == "train":
             return _train(args, argv)
         if args.command == "bench-train":
@@ -729,6 +736,29 @@ def _robots(args: argparse.Namespace) -> int:
     for r in rows:
         print(f"{r['name']:<8} {r['package'] or '?':<20} {r['dof']:>3}  {r['kinematics']:<12} "
               f"{'yes' if r['shipped_policy'] else 'no':<14}  {r['env_id'] or '-'}")
+    return 0
+
+
+def _rays(args: argparse.Namespace) -> int:
+    from rayreach.robots import get_robot
+    from rayreach.sim.sensors import RAY_RANGE, layout_rows
+
+    spec = get_robot(args.robot)
+    rows = layout_rows(spec)
+    if args.plot is not None:
+        from rayreach.evaluate.ray_layout import ray_layout_figure
+
+        print(f"layout drawn to {ray_layout_figure(spec, args.plot)}", file=sys.stderr)
+    if args.json:
+        print(json.dumps(rows))
+        return 0
+    print(f"{spec.name}: {len(rows)} rays, range {RAY_RANGE} m; origin and direction in the flange frame "
+          f"({spec.flange_link}, chain frame {spec.n_joints}, z along the tool)")
+    print(f"{'ray':>3}  {'sensor':<10} {'mount link':<14} {'origin (m)':<26} direction")
+    for r in rows:
+        origin = " ".join(f"{v:+.3f}" for v in r["origin_flange"])
+        direction = " ".join(f"{v:+.3f}" for v in r["direction_flange"])
+        print(f"{r['index']:>3}  {r['sensor']:<10} {r['link']:<14} {origin:<26} {direction}")
     return 0
 
 

@@ -82,8 +82,25 @@ def mount_offset(mount: SensorMount) -> np.ndarray:
     return pose_matrix(mount.xyz, rpy_to_matrix(mount.rpy))
 
 
+def layout_rows(spec: RobotSpec) -> list[dict]:
+    """Every ray in observation order, as a user mounts or emulates it: its sensor, the mount's
+    link and chain frame, its origin and unit direction in the mount frame and in the flange
+    frame (chain frame n, the tool's axis along +z)."""
+    rows = []
+    for group, (sensor, block) in zip(ray_layout(spec), SENSOR_SLICES.items()):
+        mount = spec.mounts[group.mount]
+        offset = mount_offset(mount)
+        for k, (origin, direction) in enumerate(zip(group.origins, group.directions)):
+            rows.append({"index": block.start + k, "sensor": sensor, "mount": group.mount, "link": mount.link,
+                         "frame": mount.frame, "origin": origin.round(6).tolist(),
+                         "direction": direction.round(6).tolist(),
+                         "origin_flange": (offset[:3, :3] @ origin + offset[:3, 3]).round(6).tolist(),
+                         "direction_flange": (offset[:3, :3] @ direction).round(6).tolist()})
+    return rows
+
+
 class RayModel:
-    """Turns DH frames into world ray origins and end points for one robot."""
+    """Turns chain frames into world ray origins and end points for one robot."""
 
     def __init__(self, spec: RobotSpec, ray_range: float = RAY_RANGE) -> None:
         self.ray_range = ray_range
@@ -107,7 +124,7 @@ class RayModel:
             self._blocks.append((m.frame, mount_offset(m), block, all_o[block], all_d[block].T.copy()))
 
     def world_rays(self, frames: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """World origins and unit directions, each (n_rays, 3), from the robot's DH frames."""
+        """World origins and unit directions, each (n_rays, 3), from the robot's chain frames."""
         origins = np.empty((self.n_rays, 3))
         directions = np.empty((self.n_rays, 3))
         for frame, offset, rows, lo, ld in self._blocks:
