@@ -71,7 +71,7 @@ def test_no_plan_has_empty_paths_and_says_why():
 @pytest.mark.parametrize("change,field", [
     (lambda d: d.pop("goals"), "missing field 'goals'"),
     (lambda d: d["obstacles"][0].pop("half_extents"), "obstacles[0].half_extents: missing"),
-    (lambda d: d.update(robot="ur3"), "unknown robot 'ur3'; known: kr16, ur5"),
+    (lambda d: d.update(robot="ur3"), "unknown robot 'ur3'; known: kr16, ur10, ur5"),
 ])
 def test_a_bad_dict_gives_the_scene_files_message(tmp_path, change, field):
     data = _exp1()

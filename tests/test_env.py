@@ -492,7 +492,7 @@ def test_render_mode_is_validated():
 
 
 def test_unknown_robot_lists_the_known_ones():
-    with pytest.raises(ValueError, match="kr16, ur5"):
+    with pytest.raises(ValueError, match="kr16, ur10, ur5"):
         ReachEnv(robot="ur3")
 
 

@@ -47,7 +47,7 @@ def test_random_experiment_names_carry_their_obstacle_count_and_split():
         runner.parse_random("random-ur5@train", 3)
     with pytest.raises(ValueError, match="valid: validation, test"):
         runner.random_experiment("ur5", split="train")
-    with pytest.raises(ValueError, match="known: kr16, ur5"):
+    with pytest.raises(ValueError, match="known: kr16, ur10, ur5"):
         EvaluationConfig(("random-abb:2@test",), ("drl",))
 
 

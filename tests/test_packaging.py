@@ -109,7 +109,8 @@ def test_wheel_carries_the_shipped_policies_and_no_training_runs(tmp_path):
     assert {f"rayreach/models/{name}" for name in SHIPPED} <= set(names)
     assert not [n for n in names if "train-" in n]
     models = sorted(n for n in names if n.startswith("rayreach/models/"))
-    assert models == sorted(["rayreach/models/__init__.py", *(f"rayreach/models/{name}" for name in SHIPPED)])
+    data = (*SHIPPED, "arm_capsules.json")  # and the arm's capsules (rayreach.acting.arm_guard)
+    assert models == sorted(["rayreach/models/__init__.py", *(f"rayreach/models/{name}" for name in data)])
     modules = {str(p.relative_to(ROOT / "src")) for p in (ROOT / "src" / "rayreach").rglob("*.py")}
     assert modules <= set(names)  # every module of the checkout is in the wheel
     assert "rayreach/scenarios/data/exp1.json" in names

@@ -226,7 +226,7 @@ def test_user_scene_file_loads(tmp_path):
 @pytest.mark.parametrize(
     "data, needles",
     [
-        (modified(robot="ur3"), ["robot", "ur3", "kr16, ur5"]),
+        (modified(robot="ur3"), ["robot", "ur3", "kr16, ur10, ur5"]),
         (modified(goals=[[-0.15, 0.4, 0.3], [0.0, 0.9, 0.3]]), ["goals[1]", "outside the workspace"]),
         (
             modified(obstacles=[{"shape": "box", "position": [0, 0.4, 0.3]}]),

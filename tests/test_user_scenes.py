@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from rayreach.evaluate.executor import ExecutionConfig, Executor
-from rayreach.planners import Status
+from rayreach.planners import Status, make_planner
 from rayreach.planners.drl import DRLPlanner
 from rayreach.scenarios.schema import StartSpec
 
@@ -71,6 +71,8 @@ def test_drl_refuses_a_scene_outside_its_training_workspace(crowded, policies):
     assert "sampling planner" in message and "refuse_unseen=False" in message
     allowed = DRLPlanner("ur5", refuse_unseen=False)
     assert allowed.refusal(ex.env.ee_pos, ex.env.goals) is None
+    assert make_planner("drl", "ur5", refuse_unseen=False).refusal(ex.env.ee_pos, ex.env.goals) is None
+    assert make_planner("drl", "ur5").refusal(ex.env.ee_pos, ex.env.goals) == message
 
 
 def test_drl_refuses_broad_worlds_outside_the_box_and_accepts_the_paper_and_random_worlds(policies):

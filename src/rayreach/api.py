@@ -82,7 +82,8 @@ def as_scenario(scene: str | Path | Mapping[str, Any] | Scenario) -> str | Scena
 
 def plan(scene: str | Path | Mapping[str, Any] | Scenario, planner: str = "drl", seed: int = 0, *,
          model: str | Path | None = None, robot: str | None = None, time_limit: float | None = None,
-         smooth: bool = False, goal_tolerance: float = 0.01, replan: bool = False) -> PlanOutcome:
+         smooth: bool = False, goal_tolerance: float = 0.01, replan: bool = False,
+         refuse_unseen: bool = True) -> PlanOutcome:
     """Plan and execute one query of ``scene`` with ``planner`` (any of
     ``rayreach.planners.PLANNER_NAMES``), its randomness from ``seed``.
 
@@ -96,6 +97,8 @@ def plan(scene: str | Path | Mapping[str, Any] | Scenario, planner: str = "drl",
     :param smooth: shortcut-smooth a sampling planner's path before executing it.
     :param goal_tolerance: success radius around each goal, m (the paper's 0.01).
     :param replan: sampling planners replan when the remaining path becomes invalid.
+    :param refuse_unseen: DRL planners answer ``"outside training"`` for a start or goal
+        outside the workspace their policy was trained in; False runs the policy anyway.
     :raises ValueError: an unknown planner (the message lists the valid ones), an unknown
         scene name or a bad scene dict (``ScenarioError``, naming the field)."""
     from rayreach.evaluate.executor import ExecutionConfig, Executor
@@ -105,7 +108,8 @@ def plan(scene: str | Path | Mapping[str, Any] | Scenario, planner: str = "drl",
         raise ValueError(f"unknown planner '{planner}'; valid: {', '.join(PLANNER_NAMES)}")
     config = ExecutionConfig(goal_tolerance=goal_tolerance, replan=replan)
     with Executor(as_scenario(scene), robot=robot, config=config) as executor:
-        built = make_planner(planner, executor.robot, model=model, time_limit=time_limit, smooth=smooth)
+        built = make_planner(planner, executor.robot, model=model, time_limit=time_limit, smooth=smooth,
+                             refuse_unseen=refuse_unseen)
         record = executor.run(built, seed)
         period = executor.period
     joint_path = np.asarray(record.joint_path, dtype=float)

@@ -36,13 +36,15 @@ def drl_acting(name: str) -> ActingConfig:
 
 
 def make_planner(name: str, robot: str, *, model: str | Path | None = None, time_limit: float | None = None,
-                 smooth: bool = False) -> GlobalPlanner | ReactivePlanner:
+                 smooth: bool = False, refuse_unseen: bool = True) -> GlobalPlanner | ReactivePlanner:
     """Planner ``name`` for ``robot`` with its defaults; ``time_limit`` (s) for sampling
-    planners, ``model`` for the DRL planner (default: the shipped policy)."""
+    planners, ``model`` for the DRL planner (default: the shipped policy), which refuses a
+    query outside its training workspace unless ``refuse_unseen`` is False."""
     if name in DRL_PLANNERS:
         from rayreach.planners.drl import DRLPlanner, shipped_model
 
-        planner = DRLPlanner(model if model is not None else shipped_model(robot), acting=drl_acting(name), name=name)
+        planner = DRLPlanner(model if model is not None else shipped_model(robot), acting=drl_acting(name), name=name,
+                             refuse_unseen=refuse_unseen)
         if planner.robot != robot:
             raise ValueError(f"model {model} is a {planner.robot} policy, not {robot}")
         return planner
