@@ -57,7 +57,7 @@ def _compare(robot: str, scenario: str, n_worlds: int, episodes: int, **override
     return outcomes
 
 
-@pytest.mark.parametrize("robot", ["ur5", "kr16"])
+@pytest.mark.parametrize("robot", ["ur5", "kr16", "ur10"])
 def test_random_worlds_step_as_reach_env_does(robot):
     """>= 100 episodes per robot on random worlds of 3 obstacles (moving plates, the KR16's
     shelf), ended by success, collision, leaving the workspace and the step budget."""

@@ -376,7 +376,7 @@ def test_exp2_switches_to_the_second_goal():
 
 
 # ---------------------------------------------------------------------- determinism, isolation
-@pytest.mark.parametrize("robot, scenario", [("ur5", "random"), ("kr16", "random"), ("ur5", "exp3")])
+@pytest.mark.parametrize("robot, scenario", [("ur5", "random"), ("kr16", "random"), ("ur10", "random"), ("ur5", "exp3")])
 def test_same_seed_same_actions_same_observations(robot, scenario):
     actions = random_actions(100, seed=9)
     runs = []
