@@ -175,6 +175,20 @@ def test_urdf_chain_of_a_small_arm_by_hand():
     np.testing.assert_allclose(out[-1], expected, atol=1e-12)
 
 
+def test_urdf_chain_starts_at_its_base_link_through_the_fixed_joints_above():
+    mounted = URDF_TWO_JOINTS.format(kind="revolute").replace(
+        '<link name="base"/>', '<link name="world"/><link name="base"/><joint name="mount" type="fixed">'
+        '<parent link="world"/><child link="base"/><origin xyz="0 0 0.1" rpy="0 0 0.3"/></joint>')
+    chain = urdf_chain(mounted, ("j1", "j2"), "flange", base_link="base")
+    np.testing.assert_allclose(chain.root, pose_matrix((0, 0, 0.1), rpy_to_matrix((0, 0, 0.3))), atol=1e-12)
+    plain = urdf_chain(URDF_TWO_JOINTS.format(kind="revolute"), ("j1", "j2"), "flange")
+    np.testing.assert_allclose(chain.before, plain.before, atol=1e-12)
+    with pytest.raises(ValueError, match="joint 'j1' \\(revolute\\) lies between the URDF's root 'world'"):
+        urdf_chain(mounted, ("j2",), "flange", base_link="upper")
+    with pytest.raises(ValueError, match="link 'elsewhere' is not on the way from the URDF's root 'world'"):
+        urdf_chain(mounted, ("j1", "j2"), "flange", base_link="elsewhere")
+
+
 @pytest.mark.parametrize("names, tip, kind, message", [
     (("j1", "j2"), "nowhere", "revolute", "URDF has no link 'nowhere'; links: base, flange, tip, upper"),
     (("j2", "j1"), "flange", "revolute", "moving joints from 'base' to 'flange' are ('j1', 'j2')"),

@@ -76,10 +76,11 @@ def _origin(joint: ET.Element) -> np.ndarray:
     return pose_matrix(xyz, rpy_to_matrix(rpy))
 
 
-def urdf_chain(urdf: str | Path, joint_names: tuple[str, ...], tip_link: str) -> JointChain:
-    """The chain from the URDF's root link to ``tip_link`` (frame n: the flange), read from the
-    joints' ``<origin>`` and ``<axis>``; the moving joints on the way must be ``joint_names``, in
-    that order. ``urdf`` is a path or the XML text."""
+def urdf_chain(urdf: str | Path, joint_names: tuple[str, ...], tip_link: str, base_link: str | None = None) -> JointChain:
+    """The chain from ``base_link`` (frame 0; None: the URDF's root link) to ``tip_link`` (frame
+    n: the flange), read from the joints' ``<origin>`` and ``<axis>``; the moving joints on the
+    way must be ``joint_names``, in that order, and only fixed joints may lie between the root
+    and ``base_link`` (they make the chain's ``root``). ``urdf`` is a path or the XML text."""
     text = Path(urdf).read_text() if isinstance(urdf, Path) else urdf
     root = ET.fromstring(text)
     joints = {j.find("child").get("link"): j for j in root.findall("joint")}  # <robot>'s own, not transmissions'
@@ -92,6 +93,18 @@ def urdf_chain(urdf: str | Path, joint_names: tuple[str, ...], tip_link: str) ->
         path.append(joints[link])
         link = joints[link].find("parent").get("link")
     path.reverse()
+    base = np.eye(4)
+    if base_link is not None and base_link != link:
+        children = [j.find("child").get("link") for j in path]
+        if base_link not in children:
+            raise ValueError(f"link '{base_link}' is not on the way from the URDF's root '{link}' to '{tip_link}'")
+        above, path = path[:children.index(base_link) + 1], path[children.index(base_link) + 1:]
+        for j in above:
+            if j.get("type") != "fixed":
+                raise ValueError(f"joint '{j.get('name')}' ({j.get('type')}) lies between the URDF's root '{link}' "
+                                 f"and the base link '{base_link}'; only fixed joints may")
+            base = base @ _origin(j)
+        link = base_link
     for j in path:
         if j.get("type") not in MOVING_TYPES + ("fixed",):
             raise ValueError(f"joint '{j.get('name')}' is {j.get('type')}; a chain takes "
@@ -115,7 +128,7 @@ def urdf_chain(urdf: str | Path, joint_names: tuple[str, ...], tip_link: str) ->
             before[index], axis[index] = pending, a / np.linalg.norm(a)
             pending, index = np.eye(4), index + 1
     after[-1] = pending  # fixed joints from the last moving joint to the flange
-    return JointChain(before=before, axis=axis, after=after, root=np.eye(4))
+    return JointChain(before=before, axis=axis, after=after, root=base)
 
 
 _CHAINS: dict[tuple[str, str], JointChain] = {}
@@ -123,7 +136,7 @@ _CHAINS: dict[tuple[str, str], JointChain] = {}
 
 def robot_chain(spec: RobotSpec) -> JointChain:
     """The spec's chain: its DH table when it has one (the paper's two robots), else its URDF's
-    joints from the root link to ``flange_link``; read once per robot and URDF."""
+    joints from ``base_link`` to ``flange_link``; read once per robot and URDF."""
     if spec.dh is not None:
         return dh_chain(spec.dh, spec.dh_base_rpy)
     source = spec.urdf()
@@ -132,5 +145,5 @@ def robot_chain(spec: RobotSpec) -> JointChain:
         if not source.is_file():
             raise FileNotFoundError(f"URDF of robot '{spec.name}' not found at {source}; is its model package "
                                     "installed?")
-        _CHAINS[key] = urdf_chain(source, spec.joint_names, spec.flange_link)
+        _CHAINS[key] = urdf_chain(source, spec.joint_names, spec.flange_link, spec.base_link)
     return _CHAINS[key]

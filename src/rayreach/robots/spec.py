@@ -79,9 +79,12 @@ class RobotSpec:
     tool: ToolSpec
     home: tuple[float, ...]
     """A collision-free, well-conditioned configuration used to seed IK."""
+    base_link: str | None = None
+    """URDF link the chain starts from (frame 0), placed at ``base_position``/``base_rpy``
+    through the fixed joints above it; None: the URDF's root link."""
     dh: DHTable | None = None
-    """The paper's DH chain (eqs. 1-2); None: the kinematics come from the URDF's joints from its
-    root link to ``flange_link`` (``rayreach.robots.chain``)."""
+    """The paper's DH chain (eqs. 1-2); None: the kinematics come from the URDF's joints from
+    ``base_link`` to ``flange_link`` (``rayreach.robots.chain``)."""
     dh_base_rpy: tuple[float, float, float] = (0.0, 0.0, 0.0)
     """With ``dh``: fixed rotation from the URDF root link to DH frame 0 (the one documented
     DH-URDF transform)."""

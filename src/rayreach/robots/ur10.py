@@ -18,6 +18,7 @@ UR10 = RobotSpec(
     lower=UR5.lower,
     upper=UR5.upper,
     velocity=(2.16, 2.16, 3.15, 3.2, 3.2, 3.2),
+    base_link="base_link",
     flange_link="tool0",
     tool=ToolSpec(length=0.13, radius=0.02),
     home=(1.3562, -0.7802, 1.9909, -2.7815, -1.5708, -3.3561),  # tool down over the workspace centre
