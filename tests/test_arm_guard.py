@@ -11,8 +11,7 @@ import pytest
 
 from exp1_scenes import layers
 from rayreach.acting import ActingEnv
-from rayreach.acting.arm_guard import VOXEL, _first_per_cell
-from rayreach.acting.mesh_capsules import PAD, PROBE, ArmCapsules
+from rayreach.acting.mesh_capsules import PAD, PROBE, VOXEL, ArmCapsules, first_per_cell
 from rayreach.sim.geometry import capsule_around
 from rayreach.acting.controller import SHORTER
 from rayreach.acting.layers import ArmRule
@@ -138,7 +137,7 @@ def test_seen_points_age_only_as_the_arm_moves():
 
 def test_points_in_one_voxel_are_measured_once_the_first_kept():
     points = np.array([[VOXEL / 4, 0.0, 0.0], [0.0, 0.0, 3 * VOXEL], [0.0, 0.0, 0.0], [-VOXEL / 4, 0.0, 0.0]])
-    assert _first_per_cell(points).tolist() == [0, 1, 3]
+    assert first_per_cell(points).tolist() == [0, 1, 3]
 
 
 def _arm_rule(env: ActingEnv) -> ArmRule:

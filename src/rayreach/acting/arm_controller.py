@@ -19,7 +19,10 @@ collision test, which the real arm's own safety provides.
         send_joint_target(step.q_target); q_now = read_joints(); readings = read_rays()
 
 The policy may be an ``OnnxPolicy`` (onnxruntime, no torch) or a ``Policy``; anything with
-``robot``, ``observation``, ``act(obs)`` and ``sample(obs, rng)`` will do.
+``robot``, ``observation``, ``act(obs, deterministic=True)`` and ``sample(obs, rng)`` will do.
+The controller needs numpy, numba, gymnasium (for the observation's space) and the robot's
+model package; with an ``OnnxPolicy``, onnxruntime and not torch. It keeps no step budget:
+the caller decides how long a query may take.
 """
 
 from __future__ import annotations
@@ -120,10 +123,13 @@ class ArmController:
 
     # ------------------------------------------------------------------ a query
     def reset(self, q: np.ndarray, goal: np.ndarray, workspace_low: np.ndarray | None = None,
-              workspace_high: np.ndarray | None = None) -> None:
+              workspace_high: np.ndarray | None = None, seed: int | None = None) -> None:
         """Start a query from joints ``q`` (rad) to ``goal`` (m, base frame of the spec's
-        placement) inside the workspace box (default: the robot's training workspace)."""
-        self._q_checked(q)
+        placement) inside the workspace box (default: the robot's training workspace). The
+        tool's orientation at ``q`` is the observation's reference, as at an episode's start.
+        ``seed`` seeds the draws where the arm was held (default: the controller's)."""
+        q = self._q_checked(q)
+        self._ref_rot_t = self.kin.fk(q)[:3, :3].T.copy()
         goal = self._vector(goal, 3, "goal")
         low = self._vector(self.spec.workspace_low if workspace_low is None else workspace_low, 3, "workspace_low")
         high = self._vector(self.spec.workspace_high if workspace_high is None else workspace_high, 3,
@@ -135,7 +141,7 @@ class ArmController:
         self._steps = 0
         self._held = False
         self._taken = True
-        self.actor.reset(self.seed)
+        self.actor.reset(self.seed if seed is None else seed)
 
     def step(self, q: np.ndarray, readings: np.ndarray, unit: str = "fraction") -> ControlStep:
         """The next joint target from the measured joints ``q`` (rad) and the 129 ray
@@ -154,8 +160,6 @@ class ArmController:
                          fractions=fractions, workspace_low=self._low, workspace_high=self._high)
         distance = float(np.linalg.norm(self._goal - ee_pos))
         first = self._episode is None
-        if first:
-            self._ref_rot_t = ee_rot.T.copy()
         base = paper_observation(q, self._goal, ee_pos, ee_rot, self._ref_rot_t, distance, fractions)[None]
         args = (_FIRST, base, ee_pos[None], fractions[None], self._low[None], self._high[None])
         if first:
@@ -191,7 +195,7 @@ class ArmController:
 
     # ------------------------------------------------------------------ checks
     def _vector(self, value: Any, n: int, name: str) -> np.ndarray:
-        v = np.asarray(value, dtype=float).reshape(-1)
+        v = np.array(value, dtype=float).reshape(-1)  # a copy: the memory keeps it, the caller may refill its own
         if v.shape != (n,) or not np.all(np.isfinite(v)):
             raise ValueError(f"{name} must be {n} finite numbers, got {np.asarray(value).tolist()}")
         return v
@@ -208,7 +212,7 @@ class ArmController:
     def _fractions(self, readings: Any, unit: str) -> np.ndarray:
         if unit not in UNITS:
             raise ValueError(f"unknown unit '{unit}'; valid: {', '.join(UNITS)}")
-        r = np.asarray(readings, dtype=float).reshape(-1)
+        r = np.array(readings, dtype=float).reshape(-1)  # a copy, as in _vector
         if r.shape != (N_RAYS,):
             raise ValueError(f"readings must hold the {N_RAYS} rays in the layout's order (docs/rays.md), got "
                              f"{np.asarray(readings).shape}")

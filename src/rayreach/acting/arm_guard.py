@@ -28,10 +28,6 @@ import numpy as np
 from rayreach.robots.urdf import TOOL_LINK
 from rayreach.sim.geometry import distances_to_segment
 from rayreach.sim.kinematics import Kinematics
-from rayreach.sim.voxels import cell_keys
-
-VOXEL = 0.005
-"""Seen points closer than this, m, are measured once (a static surface is hit again every step)."""
 
 CAPSULE_FILE = "arm_capsules.json"
 """Package data of ``rayreach.models``: each robot's capsules in its chain frames, fitted with
@@ -113,19 +109,12 @@ class ChainCapsules:
         return float(min(within, bound.min())) if bound.size else within
 
 
-def _first_per_cell(points: np.ndarray) -> np.ndarray:
-    """Indices, in order, of the first of ``points`` in each ``VOXEL``-sized cell (a static
-    surface is hit again every step)."""
-    _, first = np.unique(cell_keys(points, VOXEL), return_index=True)
-    return np.sort(first)
-
-
 class ArmGuard:
-    """The arm's rule for one episode (``SafetyLayer.arm_clearance``): whether a joint step
+    """The arm's rule (``SafetyLayer.arm_clearance``): whether a joint step
     keeps the blind links clear of the points the rays have seen (``RayMemory.seen_points``),
     and the tool too where ``links`` holds it (``TOOL_LINK``) and ``tool`` is set
-    (``SafetyLayer.guard_tool``), at ``tool_clearance`` (None: ``clearance``). Made where the
-    links' pose at the start does not enter: every step is measured from where the arm is."""
+    (``SafetyLayer.guard_tool``), at ``tool_clearance`` (None: ``clearance``). It keeps no
+    state: every step is measured from where the arm is."""
 
     def __init__(self, links: LinkCapsules, clearance: float, tool: bool = False,
                  tool_clearance: float | None = None) -> None:
@@ -137,9 +126,10 @@ class ArmGuard:
                                        if tool and only_tool.any() else [])
 
     def allows(self, q_now: np.ndarray, q: np.ndarray, points: np.ndarray, tool: bool = True) -> bool:
-        """Whether moving the joints from ``q_now`` to ``q`` keeps the arm links and the tool each their clearance from ``points`` (world,
-        m, (n, 3)), or brings them no nearer than they are now; ``tool=False`` leaves the
-        tool out this step. Leaves the links posed at ``q`` or ``q_now``."""
+        """Whether moving the joints from ``q_now`` to ``q`` keeps the arm links and the tool
+        each their clearance from ``points`` (world, m, (n, 3)), or brings them no nearer than
+        they are now; ``tool=False`` leaves the tool out this step. Leaves the links posed at
+        ``q`` or ``q_now``."""
         ends = self.links.pose(q)
         for use, clearance in self._with_tool if tool else self._arm:
             after = self.links.clearance(points, clearance, ends, use)
@@ -147,5 +137,5 @@ class ArmGuard:
                 now = self.links.pose(q_now)
                 if after < self.links.clearance(points, clearance, now, use):
                     return False
-                self.links.pose(q)
+                self.links.pose(q)  # PyBullet measures the links where they are posed
         return True

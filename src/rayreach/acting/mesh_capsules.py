@@ -14,11 +14,15 @@ from pathlib import Path
 import numpy as np
 import pybullet as p
 
-from rayreach.acting.arm_guard import CAPSULE_FILE, _first_per_cell, near_capsules
+from rayreach.acting.arm_guard import CAPSULE_FILE, near_capsules
 from rayreach.robots.urdf import TOOL_LINK
 from rayreach.sim.geometry import capsule_around
 from rayreach.sim.kinematics import Kinematics
 from rayreach.sim.scene import Scene
+from rayreach.sim.voxels import cell_keys
+
+VOXEL = 0.005
+"""Seen points closer than this, m, are measured once (a static surface is hit again every step)."""
 
 PROBE = 1e-4
 """Radius, m, of the sphere PyBullet measures a seen point as."""
@@ -91,7 +95,7 @@ class ArmCapsules:
         for k in np.flatnonzero((bound < within).any(axis=0)):
             order = np.argsort(bound[:, k])
             order = order[bound[order, k] < within]
-            for i in order[_first_per_cell(points[order])]:
+            for i in order[first_per_cell(points[order])]:
                 if bound[i, k] - PAD >= best:
                     break
                 close = p.getClosestPoints(self.scene.robot, -1, best, linkIndexA=int(links[k]),
@@ -99,6 +103,13 @@ class ArmCapsules:
                                            physicsClientId=self.scene.client)
                 best = min([best, *(c[8] for c in close)])
         return float(best)
+
+
+def first_per_cell(points: np.ndarray) -> np.ndarray:
+    """Indices, in order, of the first of ``points`` in each ``VOXEL``-sized cell (a static
+    surface is hit again every step)."""
+    _, first = np.unique(cell_keys(points, VOXEL), return_index=True)
+    return np.sort(first)
 
 
 def chain_capsule_rows(scene: Scene, kin: Kinematics, links: tuple[str, ...]) -> list[dict]:

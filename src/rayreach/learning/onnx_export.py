@@ -167,11 +167,10 @@ class OnnxPolicy:
         return ObservationConfig(**(self.meta.get("observation") or {}))
 
     def act(self, obs: np.ndarray, deterministic: bool = True) -> np.ndarray:
-        """The action (6,) for one observation, or (batch, 6) for a batch. The graph holds the
-        deterministic action only."""
+        """The deterministic action (6,) for one observation, or (batch, 6) for a batch
+        (``sample`` draws one)."""
         if not deterministic:
-            raise ValueError("an ONNX policy holds the deterministic action only; sample with the torch "
-                             "Policy")
+            raise ValueError("act() gives the deterministic action; draw one with OnnxPolicy.sample(obs, rng)")
         obs = np.asarray(obs, dtype=np.float32)
         single = obs.ndim == 1
         batch = obs.reshape(1, -1) if single else obs

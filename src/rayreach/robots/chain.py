@@ -80,8 +80,8 @@ def urdf_chain(urdf: str | Path, joint_names: tuple[str, ...], tip_link: str, ba
     """The chain from ``base_link`` (frame 0; None: the URDF's root link) to ``tip_link`` (frame
     n: the flange), read from the joints' ``<origin>`` and ``<axis>``; the moving joints on the
     way must be ``joint_names``, in that order, and only fixed joints may lie between the root
-    and ``base_link`` (they make the chain's ``root``). ``urdf`` is a path or the XML text."""
-    text = Path(urdf).read_text() if isinstance(urdf, Path) else urdf
+    and ``base_link`` (they make the chain's ``root``). ``urdf`` is a path, or the XML text itself."""
+    text = urdf if isinstance(urdf, str) and urdf.lstrip().startswith("<") else Path(urdf).read_text()
     root = ET.fromstring(text)
     joints = {j.find("child").get("link"): j for j in root.findall("joint")}  # <robot>'s own, not transmissions'
     links = {link.get("name") for link in root.findall("link")}
@@ -131,7 +131,7 @@ def urdf_chain(urdf: str | Path, joint_names: tuple[str, ...], tip_link: str, ba
     return JointChain(before=before, axis=axis, after=after, root=base)
 
 
-_CHAINS: dict[tuple[str, str], JointChain] = {}
+_CHAINS: dict[tuple, JointChain] = {}
 
 
 def robot_chain(spec: RobotSpec) -> JointChain:
@@ -140,7 +140,7 @@ def robot_chain(spec: RobotSpec) -> JointChain:
     if spec.dh is not None:
         return dh_chain(spec.dh, spec.dh_base_rpy)
     source = spec.urdf()
-    key = (spec.name, str(source))
+    key = (spec.name, str(source), spec.joint_names, spec.base_link, spec.flange_link)
     if key not in _CHAINS:
         if not source.is_file():
             raise FileNotFoundError(f"URDF of robot '{spec.name}' not found at {source}; is its model package "

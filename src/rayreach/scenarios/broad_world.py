@@ -110,7 +110,7 @@ def arm_reach(kin: Kinematics) -> ArmReach:
 
     def distance(q: np.ndarray) -> float:
         frames = kin.frames(q)
-        return float(np.linalg.norm(kin.ee_from_frames(frames)[:3, 3] - frames[1][:3, 3]))
+        return float(np.linalg.norm(kin.ee_from_frames(frames)[:3, 3] - kin.joint_origin(frames, 1)))
 
     qs = rng.uniform(low, high, (1000, len(low)))
     values = np.array([distance(q) for q in qs])
@@ -126,7 +126,7 @@ def arm_reach(kin: Kinematics) -> ArmReach:
                 step *= 0.95
         reach = max(reach, value)
     frames = kin.frames(np.zeros(len(low)))
-    axis, shoulder = frames[0][:3, 3], frames[1][:3, 3]
+    axis, shoulder = frames[0][:3, 3], kin.joint_origin(frames, 1)
     result = ArmReach(
         base_xy=(float(axis[0]), float(axis[1])),
         offset=float(math.hypot(shoulder[0] - axis[0], shoulder[1] - axis[1])),

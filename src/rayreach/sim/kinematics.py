@@ -95,10 +95,16 @@ class Kinematics:
     def frames(self, q: np.ndarray) -> np.ndarray:
         """World poses of frames 0..n (frame n is the flange), shape (n + 1, 4, 4): paper eq. 1
         over the chain's joints (``rayreach.robots.chain``)."""
+        q = np.asarray(q, dtype=float)
+        if q.shape != (self.chain.n_joints,):  # the compiled loop would read past the chain
+            raise ValueError(f"{self.spec.name} has {self.chain.n_joints} joints; got joint angles of shape {q.shape}")
         out = np.empty((self.chain.n_joints + 1, 4, 4))
-        frames_kernel(self.world0, self.chain.before, self.chain.axis, self.chain.after,
-                      np.asarray(q, dtype=float), out)
+        frames_kernel(self.world0, self.chain.before, self.chain.axis, self.chain.after, q, out)
         return out
+
+    def joint_origin(self, frames: np.ndarray, i: int) -> np.ndarray:
+        """World position of joint ``i``'s origin (0-based) in the arm's ``frames``, m (3,)."""
+        return frames[i, :3, :3] @ self._joint_origin[i] + frames[i, :3, 3]
 
     def fk(self, q: np.ndarray) -> np.ndarray:
         """World pose (4x4) of the end effector, the tool tip (paper eq. 1)."""

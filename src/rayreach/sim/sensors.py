@@ -89,6 +89,9 @@ def layout_rows(spec: RobotSpec) -> list[dict]:
     rows = []
     for group, (sensor, block) in zip(ray_layout(spec), SENSOR_SLICES.items()):
         mount = spec.mounts[group.mount]
+        if mount.frame != spec.n_joints:
+            raise ValueError(f"mount '{group.mount}' of {spec.name} sits on chain frame {mount.frame}, not on the "
+                             f"flange (frame {spec.n_joints}): its rays have no fixed place in the flange frame")
         offset = mount_offset(mount)
         for k, (origin, direction) in enumerate(zip(group.origins, group.directions)):
             rows.append({"index": block.start + k, "sensor": sensor, "mount": group.mount, "link": mount.link,
