@@ -18,13 +18,13 @@ from rayreach.cli import main
 from rayreach.planners.drl import MODELS_DIR, resolve_model, shipped_model, shipped_robots
 
 ROOT = Path(__file__).resolve().parents[1]
-SHIPPED = ("ur5.zip", "ur5.json", "kr16.zip", "kr16.json")
+SHIPPED = ("ur5.zip", "ur5.json", "kr16.zip", "kr16.json", "ur10.zip", "ur10.json")
 
 
 def test_shipped_policies_are_package_data_of_rayreach_models():
     assert MODELS_DIR == Path(str(resources.files("rayreach.models")))
     assert all((MODELS_DIR / name).is_file() for name in SHIPPED)
-    assert shipped_robots() == ("ur5", "kr16")
+    assert shipped_robots() == ("ur5", "kr16", "ur10")
 
 
 def test_resolver_takes_robot_names_and_paths(tmp_path, monkeypatch):
@@ -44,14 +44,14 @@ def test_resolver_names_the_robots_and_paths_for_a_bad_name():
     with pytest.raises(FileNotFoundError) as bad:
         resolve_model("ur7")
     message = str(bad.value)
-    assert "'ur7'" in message and "ur5, kr16" in message and "path" in message
-    with pytest.raises(FileNotFoundError, match="no shipped policy for 'abb'; shipped: ur5, kr16"):
+    assert "'ur7'" in message and "ur5, kr16, ur10" in message and "path" in message
+    with pytest.raises(FileNotFoundError, match="no shipped policy for 'abb'; shipped: ur5, kr16, ur10"):
         shipped_model("abb")
 
 
 def test_cli_model_options_take_robot_names(capsys):
     assert main(["rollout", "--model", "ur7", "exp1", "--json"]) == 2
-    assert "ur5, kr16" in capsys.readouterr().err
+    assert "ur5, kr16, ur10" in capsys.readouterr().err
     assert main(["bench-acting", "--model", "ur7"]) == 2
     assert "'ur7'" in capsys.readouterr().err
     assert main(["rollout", "--model", "ur5", "exp1", "--episodes", "1", "--json"]) == 0
