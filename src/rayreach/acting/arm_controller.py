@@ -39,19 +39,16 @@ from rayreach.acting.layers import acting_components
 from rayreach.acting.memory import RayMemory
 from rayreach.acting.pipeline import Episode, choose
 from rayreach.acting.resample import ActingPolicy
-from rayreach.env.observation import OBS_SIZE, Observer, paper_observation
+from rayreach.env.observation import OBS_SIZE, ONE_WORLD, Observer, paper_observation
 from rayreach.env.perception import Perception
 from rayreach.env.rewards import RewardWeights
 from rayreach.robots import RobotSpec, get_robot
 from rayreach.robots.urdf import TOOL_LINK
 from rayreach.sim.kinematics import STEP_IK, IKParams, IKResult, Kinematics
 from rayreach.sim.sensors import N_RAYS, RAY_RANGE, RayModel
-from rayreach.sim.transforms import rotvec_to_matrix
 
 UNITS = ("fraction", "m")
 """How ray readings may come: hit fractions of the range in [0, 1], or metres."""
-
-_FIRST = np.array([0])
 
 
 @dataclass(frozen=True)
@@ -161,7 +158,7 @@ class ArmController:
         distance = float(np.linalg.norm(self._goal - ee_pos))
         first = self._episode is None
         base = paper_observation(q, self._goal, ee_pos, ee_rot, self._ref_rot_t, distance, fractions)[None]
-        args = (_FIRST, base, ee_pos[None], fractions[None], self._low[None], self._high[None])
+        args = (ONE_WORLD, base, ee_pos[None], fractions[None], self._low[None], self._high[None])
         if first:
             memory = RayMemory()
             memory.add(now, moved=True)
@@ -182,8 +179,7 @@ class ArmController:
         action = self.actor.act(self.observer.obs[0].copy(), {"acting": {"held": self._held}})
 
         def solve(delta: np.ndarray, keep_orientation: bool) -> IKResult:
-            rotation = rotvec_to_matrix(delta[3:]) @ ee_rot if keep_orientation else None
-            return self.kin.ik(ee_pos + delta[:3], rotation, q, self.ik, start_frames=frames)
+            return self.kin.step_ik(delta, q, frames, ee_pos, ee_rot, self.ik, keep_orientation)
 
         chosen = choose(self.components, self._episode, np.asarray(action, dtype=float).reshape(6), solve,
                         lambda ik: self.kin.ee_from_frames(ik.frames))

@@ -40,6 +40,8 @@ N_ROBOT_OBS = 13
 """The paper's values before the rays: joints, goal offset, orientation, distance."""
 OBS_SIZE = N_ROBOT_OBS + N_RAYS
 """The paper's observation (``rayreach.env.reach``'s table)."""
+ONE_WORLD = np.array([0])
+"""The one world of an env that is not batched, as ``Observer`` indexes worlds."""
 NEAR = 0.05
 """Goal offsets up to this, m, span the whole [-1, 1] of the fine offset."""
 WALL_RANGE = 0.3

@@ -63,7 +63,8 @@ import gymnasium as gym
 import numpy as np
 
 from rayreach.env import rewards as R
-from rayreach.env.observation import N_ROBOT_OBS, OBS_SIZE, ObservationConfig, Observer, paper_observation  # noqa: F401
+from rayreach.env.observation import (N_ROBOT_OBS, OBS_SIZE, ONE_WORLD, ObservationConfig,  # noqa: F401
+                                      Observer, paper_observation)
 from rayreach.env.perception import Perception
 from rayreach.robots import ROBOTS, RobotSpec, get_robot
 from rayreach.scenarios import RANDOM, WORLD_SUITES, Scenario, ScenarioError, get_scenario
@@ -73,7 +74,6 @@ from rayreach.scenarios.suites import suite_workspace, world_sampler
 from rayreach.sim.kinematics import STEP_IK, IKParams, IKResult, Kinematics
 from rayreach.sim.scene import Scene
 from rayreach.sim.sensors import N_RAYS, RAY_RANGE, RayModel
-from rayreach.sim.transforms import rotvec_to_matrix
 
 REWARD_TERM_NAMES = ("success", "collision", "distance", "shaking", "out_of_bounds", "exhausted", "progress",
                      "proximity")
@@ -117,8 +117,6 @@ class EnvConfig:
             raise ValueError(f"control_period must be positive, got {self.control_period}")
 
 
-_FIRST = np.array([0])
-"""``ReachEnv``'s one world, as ``Observer`` indexes worlds."""
 
 OUTCOMES = ("success", "collision", "out_of_bounds", "timeout")
 """How an episode can end (``episode_outcome``)."""
@@ -299,9 +297,7 @@ class ReachEnv(gym.Env):
         """DLS IK (Algorithm 1) for the end-effector step ``delta`` (dx, dy, dz in m, then a
         rotation vector in rad) from where the arm is; ``keep_orientation`` False solves for
         the position only. Nothing moves."""
-        target_pos = self.ee_pos + delta[:3]
-        target_rot = rotvec_to_matrix(delta[3:]) @ self.ee_rot if keep_orientation else None
-        return self.kin.ik(target_pos, target_rot, self.q, self.config.ik, start_frames=self.frames)
+        return self.kin.step_ik(delta, self.q, self.frames, self.ee_pos, self.ee_rot, self.config.ik, keep_orientation)
 
     def tool_pose(self, ik: IKResult) -> np.ndarray:
         """The end effector's 4 x 4 pose where ``ik``'s solution puts it."""
@@ -398,7 +394,7 @@ class ReachEnv(gym.Env):
         """This world's row of ``Observer.reset``'s and ``step``'s arguments."""
         scenario = self.scenario
         assert scenario is not None
-        return (_FIRST, self._observation(distance, rays)[None], self.ee_pos[None], rays[None],
+        return (ONE_WORLD, self._observation(distance, rays)[None], self.ee_pos[None], rays[None],
                 np.asarray(scenario.workspace_low)[None], np.asarray(scenario.workspace_high)[None])
 
     def _observation(self, distance: float, rays: np.ndarray) -> np.ndarray:

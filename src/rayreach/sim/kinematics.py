@@ -16,7 +16,7 @@ import numpy as np
 from rayreach.robots.chain import robot_chain
 from rayreach.robots.spec import RobotSpec
 from rayreach.sim.ik_kernel import frames_kernel, ik_kernel
-from rayreach.sim.transforms import pose_matrix, rpy_to_matrix
+from rayreach.sim.transforms import pose_matrix, rotvec_to_matrix, rpy_to_matrix
 
 
 @dataclass(frozen=True)
@@ -89,7 +89,7 @@ class Kinematics:
     @property
     def base_turn_sign(self) -> float:
         """+1 when a positive first joint turns the arm counter-clockwise about frame 0's z axis."""
-        return 1.0 if float(self._joint_axis[0] @ np.array([0.0, 0.0, 1.0])) >= 0.0 else -1.0
+        return 1.0 if self._joint_axis[0, 2] >= 0.0 else -1.0
 
     # ------------------------------------------------------------------ forward kinematics
     def frames(self, q: np.ndarray) -> np.ndarray:
@@ -161,6 +161,15 @@ class Kinematics:
                   result)
         return IKResult(q=q, converged=bool(result[0] > 0.5), iterations=int(result[1]),
                         position_error=float(result[2]), orientation_error=float(result[3]), frames=frames)
+
+    def step_ik(self, delta: np.ndarray, q: np.ndarray, frames: np.ndarray, ee_pos: np.ndarray,
+                ee_rot: np.ndarray, params: IKParams, keep_orientation: bool = True) -> IKResult:
+        """The paper's control step: IK for the end-effector step ``delta`` (dx, dy, dz in m,
+        then a rotation vector in rad, applied to the tool's orientation) from ``q``, whose
+        frames and tool pose are ``frames``, ``ee_pos`` and ``ee_rot``; ``keep_orientation``
+        False solves for the position only. Simulation and a real arm's controller share it."""
+        target_rot = rotvec_to_matrix(delta[3:]) @ ee_rot if keep_orientation else None
+        return self.ik(ee_pos + delta[:3], target_rot, q, params, start_frames=frames)
 
     def kernel_args(self, params: IKParams) -> tuple:
         """The chain and ``params`` as ``ik_kernel`` takes them, up to its target: frame 0's
