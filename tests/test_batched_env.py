@@ -190,3 +190,14 @@ def test_broad_worlds_step_as_reach_env_does():
 
     outcomes = _compare("ur5", "broad", 4, 8, max_steps=60, goal_tolerance=0.1, observation=ObservationConfig.planner())
     assert sum(outcomes.values()) >= 8
+
+
+@pytest.mark.parametrize("robot, scenario", [("kr16", "random"), ("ur10", "random"), (None, "exp2")])
+def test_progress_round_the_obstacles_steps_as_reach_env_does(robot, scenario):
+    """The progress term measured along the goal field (``goal_field``): both envs build the
+    same field at each reset and goal change, and sum the same rewards."""
+    from rayreach.env.rewards import RewardWeights
+
+    rewards = RewardWeights(progress=10.0, progress_around_obstacles=True)
+    outcomes = _compare(robot, scenario, 6, 20, max_steps=80, goal_tolerance=0.1, rewards=rewards)
+    assert sum(outcomes.values()) >= 20

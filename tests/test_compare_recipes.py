@@ -32,7 +32,7 @@ def test_variants_change_one_thing_of_their_recipe():
 
     assert COMPARE_VARIANTS == tuple(VARIANTS)  # the CLI names them without importing torch
     default = recipe("default", robot="kr16")
-    for name in ("paper-observation", "no-scans", "no-workspace", "entropy"):
+    for name in ("paper-observation", "no-scans", "no-workspace", "entropy", "around-obstacles", "proximity"):
         changed = [f.name for f in fields(default) if getattr(variant(name, "kr16"), f.name) != getattr(default, f.name)]
         assert len(changed) == 1, (name, changed)
     assert variant("no-scans", "ur5").observation.scans == 0 and variant("paper-observation", "ur5").observation.is_paper

@@ -159,6 +159,21 @@ def test_rollout_counts_outcomes_and_sources_per_world_kind():
     assert summary.acting_share == share(sources) and sum(summary.acting_share.values()) == pytest.approx(1.0)
 
 
+def test_batched_rollout_plays_the_worlds_rollout_plays():
+    """The policy alone stepped in one ``BatchedReachEnv``: per seed the same outcome, steps
+    and path as ``rollout``'s one world at a time."""
+    from rayreach.evaluate.rollout import rollout, rollout_batched
+
+    one = rollout(MODELS_DIR / "ur10.zip", "random", episodes=5, acting=ActingConfig.off(), progress=False)
+    batched = rollout_batched(MODELS_DIR / "ur10.zip", episodes=5)
+    for a, b in zip(one.per_episode, batched.per_episode):
+        assert (a["seed"], a["outcome"], a["steps"], a["kinds"]) == (b["seed"], b["outcome"], b["steps"], b["kinds"])
+        assert a["path_length"] == pytest.approx(b["path_length"], rel=1e-5)  # a batch of forward passes rounds alike, not bitwise
+    assert batched.to_dict() == one.to_dict() | {"path_length_mean": batched.path_length_mean}
+    with pytest.raises(ValueError, match="leave the test split"):
+        rollout_batched(MODELS_DIR / "ur10.zip", episodes=2, seed=8_999_999, split="test")
+
+
 def test_rollout_refuses_seeds_outside_its_split():
     from rayreach.evaluate.rollout import rollout
 

@@ -13,7 +13,8 @@ from rayreach.robots import ROBOTS  # specs only: numpy, no simulator
 EVAL_PLANNERS = "drl,rrt,ncrrt,ompl-rrt,ompl-rrtconnect"
 TRAIN_RECIPES = ("default", "baseline", "paper")
 """``rayreach.learning.train.RECIPES``' names (that module imports torch's stack)."""
-COMPARE_VARIANTS = ("baseline", "default", "paper", "paper-observation", "no-scans", "no-workspace", "entropy")
+COMPARE_VARIANTS = ("baseline", "default", "paper", "paper-observation", "no-scans", "no-workspace", "entropy",
+                    "around-obstacles", "proximity")
 """``rayreach.evaluate.compare_recipes.VARIANTS``' names."""
 ROBOT_HELP = " or ".join(ROBOTS)
 
@@ -160,6 +161,9 @@ def build_parser() -> argparse.ArgumentParser:
                        help="weight of the progress reward term (0: the paper's reward alone; also changes a resumed run)")
     train.add_argument("--proximity-weight", type=float, default=None,
                        help="weight of the proximity reward term (0: the paper's reward alone; also changes a resumed run)")
+    train.add_argument("--progress-around-obstacles", action=argparse.BooleanOptionalAction, default=None,
+                       help="measure the progress term along the shortest way round the static obstacles, not the "
+                            "straight line (default: the recipe's; also changes a resumed run)")
     train.add_argument("--shield-weight", type=float, default=None,
                        help="weight of the shielded reward term with --acting-layers (also changes a resumed run)")
     train.add_argument("--target-kl", type=float, default=None, help="early-stop updates at this KL (0: never)")
@@ -227,6 +231,9 @@ def build_parser() -> argparse.ArgumentParser:
         roll.add_argument(f"--no-{layer.replace('_', '-')}", dest=f"no_{layer}", action="store_true",
                           help=f"switch off the {what} (rayreach.acting)")
     roll.add_argument("--policy-alone", action="store_true", help="switch off every acting layer: the policy alone")
+    roll.add_argument("--batched", action="store_true",
+                      help="with --policy-alone on random or broad worlds, deterministic: step all episodes' worlds at "
+                           "once (one BatchedReachEnv, the same worlds; many times faster)")
     roll.add_argument("--final-approach-radius", type=float, default=None,
                       help="distance to the goal within which the final approach may act, m (default: the robot's, "
                            "UR5 0.1, KR16 0.2)")
@@ -564,6 +571,8 @@ def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
         overrides["proximity_weight"] = args.proximity_weight
     if args.shield_weight is not None:
         overrides["shield_weight"] = args.shield_weight
+    if args.progress_around_obstacles is not None:
+        overrides["progress_around_obstacles"] = args.progress_around_obstacles
     if args.obstacles is not None:
         overrides["obstacles"] = ObstacleParams(start=args.obstacles, minimum=args.obstacles, maximum=args.obstacles)
     if args.goal_size is not None:
@@ -663,12 +672,23 @@ def acting_from_args(args: argparse.Namespace):
 
 
 def _rollout(args: argparse.Namespace, scenario: str) -> int:
-    from rayreach.evaluate.rollout import rollout
+    from rayreach.evaluate.rollout import rollout, rollout_batched
+    from rayreach.scenarios import WORLD_SUITES
 
     acting = acting_from_args(args)
-    summary = rollout(_model(args.model), scenario, episodes=args.episodes, deterministic=not args.stochastic,
-                      goal_tolerance=args.tolerance, n_obstacles=args.obstacles, progress=not args.json,
-                      acting=acting, start_clearance=args.start_clearance, seed=args.seed, split=args.split)
+    if args.batched:
+        if not args.policy_alone or args.stochastic or scenario not in WORLD_SUITES:
+            raise ValueError("--batched steps the policy alone (--policy-alone), deterministic, on drawn worlds "
+                             f"({', '.join(WORLD_SUITES)}); got {scenario}"
+                             + (", --stochastic" if args.stochastic else "")
+                             + ("" if args.policy_alone else ", acting layers on"))
+        summary = rollout_batched(_model(args.model), episodes=args.episodes, goal_tolerance=args.tolerance,
+                                  n_obstacles=args.obstacles, seed=args.seed, start_clearance=args.start_clearance,
+                                  split=args.split, suite=scenario)
+    else:
+        summary = rollout(_model(args.model), scenario, episodes=args.episodes, deterministic=not args.stochastic,
+                          goal_tolerance=args.tolerance, n_obstacles=args.obstacles, progress=not args.json,
+                          acting=acting, start_clearance=args.start_clearance, seed=args.seed, split=args.split)
     if args.json:
         print(json.dumps({"scenario": scenario, **summary.to_dict()}))
         return 0

@@ -41,6 +41,7 @@ import numpy as np
 from gymnasium.utils import seeding
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices
 
+from rayreach.env.goal_field import FieldBatch, GoalField, scenario_field
 from rayreach.env.observation import Observer
 from rayreach.env.reach import (N_ROBOT_OBS, OBS_SIZE, REWARD_TERM_NAMES, EnvConfig, make_config,
                                 observation_space, resolve_task)
@@ -124,6 +125,12 @@ class BatchedReachEnv(VecEnv):
         self.steps = np.zeros(n, dtype=np.int64)
         self.time = np.zeros(n)
         self.previous_distance = np.zeros(n)
+        self.fields = FieldBatch(n) if cfg.rewards.progress_around_obstacles else None
+        """Each world's goal field where the progress term goes round obstacles (``goal_field``)."""
+        self.previous_way = np.zeros(n)
+        """What the progress term measured last step: the way round obstacles, or the distance."""
+        self._scenarios: list[Scenario | None] = [None] * n
+        self._fixed_fields: dict[int, GoalField] = {}
         self.shake_queue = np.zeros((n, SHAKE_WINDOW + 1))
         self.shake_length = np.zeros(n, dtype=np.int64)
         self.fractions = np.ones((n, N_RAYS))
@@ -166,6 +173,7 @@ class BatchedReachEnv(VecEnv):
             self.goals = grown
         self.goals[i, : len(goals)] = goals
         self.n_goals[i] = len(goals)
+        self._scenarios[i] = scenario
         self.ws_low[i] = scenario.workspace_low
         self.ws_high[i] = scenario.workspace_high
 
@@ -220,6 +228,7 @@ class BatchedReachEnv(VecEnv):
         self.episode_terms[i] = 0.0
         self.previous_distance[i] = float(np.linalg.norm(self.goals[i, 0] - self.ee_pos[i]))
         which = np.array([i])
+        self.previous_way[i] = self._ways(which, self.previous_distance)[0]
         cast_worlds(self.layout, self.frames, self.obstacles, cfg.ray_range, which, self.fractions)
         self._observe(which, self.previous_distance)
         self.observer.reset(which, *self._observer_args(which))
@@ -253,6 +262,7 @@ class BatchedReachEnv(VecEnv):
         clock.lap("collision_bullet")
         outside = ~((self.ee_pos >= self.ws_low) & (self.ee_pos <= self.ws_high)).all(axis=1)
         distance = _distances(self.goals[self._all, self.goal_index] - self.ee_pos)
+        way = self._ways(self._all, distance, new_goal=False)
         reached = distance < self.tolerance
         n_shakes = _shake(self.shake_queue, self.shake_length, distance, SHAKE_WINDOW)
         clock.lap("reward_and_obs")
@@ -270,7 +280,9 @@ class BatchedReachEnv(VecEnv):
         terms[:, 3] = w.shaking * n_shakes
         terms[:, 4] = np.where(outside, w.out_of_bounds, 0.0)
         terms[:, 5] = np.where(truncated, w.exhausted, 0.0)
-        terms[:, 6] = w.progress * (self.previous_distance - distance)
+        with np.errstate(invalid="ignore"):  # inf - inf: a step next to an obstacle counts nothing
+            progress = self.previous_way - way
+        terms[:, 6] = w.progress * np.where(np.isfinite(progress), progress, 0.0)
         terms[:, 7] = w.proximity * np.maximum(0.0, 1.0 - self.fractions.min(axis=1) / w.proximity_range)
         rewards = terms[:, 0].copy()
         for k in range(1, terms.shape[1]):  # summed in ReachEnv's order
@@ -282,7 +294,9 @@ class BatchedReachEnv(VecEnv):
             self.goal_index[switch] += 1
             self.shake_length[switch] = 0
             distance[switch] = _distances(self.goals[switch, self.goal_index[switch]] - self.ee_pos[switch])
+            way[switch] = self._ways(switch, distance, new_goal=True)
         self.previous_distance = distance
+        self.previous_way = way
         self._observe(self._all, distance)
         self.observer.step(self._all, *self._observer_args(self._all))
 
@@ -312,6 +326,29 @@ class BatchedReachEnv(VecEnv):
             self.reset_world(int(i))
         clock.lap("resets")
         return self.observer.obs.copy(), rewards.astype(np.float32), dones, infos
+
+    def _ways(self, which: np.ndarray, distance: np.ndarray, new_goal: bool = True) -> np.ndarray:
+        """What the progress term measures for worlds ``which``: the way round the obstacles to
+        the current goal (a field built first where ``new_goal``), or ``distance[which]``."""
+        if self.fields is None:
+            return distance[which]
+        if new_goal:
+            for i in which:
+                self.fields.set_world(int(i), self._goal_field(int(i)))
+        return self.fields.distances(self.ee_pos[which], which)
+
+    def _goal_field(self, i: int) -> GoalField:
+        index = int(self.goal_index[i])
+        if self.random:
+            return scenario_field(self._scenarios[i], index)  # type: ignore[arg-type]
+        if index not in self._fixed_fields:  # one scenario for all worlds: each goal's field once
+            self._fixed_fields[index] = scenario_field(self._scenarios[i], index)  # type: ignore[arg-type]
+        return self._fixed_fields[index]
+
+    @property
+    def scenarios(self) -> list[Scenario]:
+        """Each world's current scenario (drawn at its last reset, or the fixed one)."""
+        return [s for s in self._scenarios if s is not None]
 
     def _observer_args(self, which: np.ndarray) -> tuple:
         """Worlds ``which``'s rows of ``Observer.reset``'s and ``step``'s arguments after ``which``."""

@@ -67,6 +67,7 @@ from rayreach.env.observation import (N_ROBOT_OBS, OBS_SIZE, ONE_WORLD, Observat
                                       Observer, paper_observation)
 from rayreach.env.perception import Perception
 from rayreach.robots import ROBOTS, RobotSpec, get_robot
+from rayreach.env.goal_field import GoalField, scenario_field
 from rayreach.scenarios import RANDOM, WORLD_SUITES, Scenario, ScenarioError, get_scenario
 from rayreach.scenarios.feasibility import solve_start, validate
 from rayreach.scenarios.random_world import RandomWorldConfig
@@ -207,6 +208,10 @@ class ReachEnv(gym.Env):
         if fixed is not None:
             self._load_fixed(fixed)
         self._shake = R.ShakeCounter()
+        self._fields: dict[int, GoalField] = {}
+        """The fixed scenario's goal fields by goal index (random worlds: this episode's)."""
+        self._field: GoalField | None = None
+        self._previous_way = 0.0
         self._ready = False
         self.episodes = 0
         """Resets so far (a wrapper acting on the env tells its own episode from another's)."""
@@ -245,6 +250,7 @@ class ReachEnv(gym.Env):
             assert self.worlds is not None
             scenario, q_start = self.worlds.sample(self.np_random, self.n_obstacles)
             self.scenario = scenario
+            self._fields = {}
             self.caster = self.scene.caster(self.config.ray_backend)
             self.scene.set_goal_markers(scenario.goals)
         else:
@@ -268,7 +274,8 @@ class ReachEnv(gym.Env):
         self._episode_terms = dict.fromkeys(REWARD_TERM_NAMES, 0.0)
         self._ready = True
         distance = float(np.linalg.norm(self.goals[0] - self.ee_pos))
-        self._previous_distance = distance
+        self._field = self._goal_field(0)
+        self._previous_way = self._way(distance)
         self.episodes += 1
         info = {"distance": distance, "ee_position": self.ee_pos.copy(), "goal": self.goals[0].copy(),
                 "goal_index": 0, "is_success": False, "collision": False, "out_of_bounds": False}
@@ -327,6 +334,7 @@ class ReachEnv(gym.Env):
         reached = distance < self.tolerance
         n_shakes = self._shake.update(distance)
         rays = self._cast_rays()
+        way = self._way(distance)
         terms = {
             "success": 0.0 if collided else R.success_reward(distance, self.tolerance, w),
             "collision": R.collision_reward(collided, w),
@@ -334,7 +342,7 @@ class ReachEnv(gym.Env):
             "shaking": R.shaking_reward(n_shakes, w),
             "out_of_bounds": R.out_of_bounds_reward(outside, w),
             "exhausted": 0.0,
-            "progress": R.progress_reward(self._previous_distance, distance, w),
+            "progress": R.progress_reward(self._previous_way, way, w),
             "proximity": R.proximity_reward(float(rays.min()), w),
         }
         final_goal = self.goal_index == len(self.goals) - 1
@@ -347,7 +355,9 @@ class ReachEnv(gym.Env):
             self.goal_index += 1
             self._shake.reset()
             distance = float(np.linalg.norm(self.goals[self.goal_index] - self.ee_pos))
-        self._previous_distance = distance
+            self._field = self._goal_field(self.goal_index)
+            way = self._way(distance)
+        self._previous_way = way
         for key, value in terms.items():
             self._episode_terms[key] += value
         info = {
@@ -371,6 +381,18 @@ class ReachEnv(gym.Env):
             info["episode_reward_terms"] = dict(self._episode_terms)
         self.observer.step(*self._observer_args(distance, rays))
         return self.observer.obs[0].copy(), float(sum(terms.values())), terminated, truncated, info
+
+    def _goal_field(self, index: int) -> GoalField | None:
+        """Goal ``index``'s field where the progress term goes round obstacles, else None."""
+        if not self.config.rewards.progress_around_obstacles:
+            return None
+        if index not in self._fields:
+            self._fields[index] = scenario_field(self.scenario, index)  # type: ignore[arg-type]
+        return self._fields[index]
+
+    def _way(self, distance: float) -> float:
+        """What the progress term measures: the way round the obstacles, or ``distance``."""
+        return self._field.distance(self.ee_pos) if self._field is not None else distance
 
     def _cast_rays(self) -> np.ndarray:
         """Hit fractions of the rays in the current state (kept, with the rays and how far

@@ -5,6 +5,7 @@ r = r_suc + r_c + r_d + r_shake + r_o + r_e with the paper's weights as defaults
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from dataclasses import dataclass
 
@@ -28,6 +29,10 @@ class RewardWeights:
     """r_shake = shaking * n_s."""
     progress: float = 0.0
     """Not in the paper (0 there): progress * (d_{t-1} - d_t), a dense term for training."""
+    progress_around_obstacles: bool = False
+    """Not in the paper: the progress term measures the distance along the shortest way round
+    the static obstacles (``rayreach.env.goal_field``), not the straight line, so that a goal
+    behind a wall does not reward stopping at the wall."""
     proximity: float = 0.0
     """Not in the paper (0 there): proximity * (1 - f / proximity_range) for the shortest ray
     fraction f below ``proximity_range``: a warning before a collision, for training."""
@@ -64,7 +69,9 @@ def shaking_reward(n_shakes: int, w: RewardWeights = RewardWeights()) -> float:
 
 
 def progress_reward(previous_distance: float, distance: float, w: RewardWeights = RewardWeights()) -> float:
-    return w.progress * (previous_distance - distance)
+    """0 where either distance is infinite (a way measured round obstacles from inside one)."""
+    delta = previous_distance - distance
+    return w.progress * delta if math.isfinite(delta) else 0.0
 
 
 def proximity_reward(min_fraction: float, w: RewardWeights = RewardWeights()) -> float:

@@ -42,6 +42,8 @@ VARIANTS: dict[str, tuple[str, dict[str, Any]]] = {
     "no-scans": ("default", {"observation": replace(ObservationConfig.planner(), scans=0)}),
     "no-workspace": ("default", {"observation": replace(ObservationConfig.planner(), workspace=False)}),
     "entropy": ("default", {"ent_coef": 0.005}),
+    "around-obstacles": ("default", {"progress_around_obstacles": True}),
+    "proximity": ("default", {"proximity_weight": -0.1}),
 }
 """What can be compared: a recipe, or a recipe with one change (its ablation)."""
 
