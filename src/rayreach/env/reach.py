@@ -63,11 +63,11 @@ import gymnasium as gym
 import numpy as np
 
 from rayreach.env import rewards as R
+from rayreach.env.goal_field import GoalField, scenario_field
 from rayreach.env.observation import (N_ROBOT_OBS, OBS_SIZE, ONE_WORLD, ObservationConfig,  # noqa: F401
                                       Observer, paper_observation)
 from rayreach.env.perception import Perception
 from rayreach.robots import ROBOTS, RobotSpec, get_robot
-from rayreach.env.goal_field import GoalField, scenario_field
 from rayreach.scenarios import RANDOM, WORLD_SUITES, Scenario, ScenarioError, get_scenario
 from rayreach.scenarios.feasibility import solve_start, validate
 from rayreach.scenarios.random_world import RandomWorldConfig

@@ -72,19 +72,14 @@ def rollout(
     count of training unless ``n_obstacles`` is given, and keep the robot's start
     ``start_clearance`` from every obstacle (``RandomWorldConfig.start_clearance``)."""
     random = scenario == RANDOM
-    chosen = get_split(split)
-    first = chosen.start if seed is None else int(seed)
-    if random and not (first in chosen and first + episodes - 1 in chosen):
-        raise ValueError(f"seeds {first}..{first + episodes - 1} leave the {split} split "
-                         f"({chosen.start}..{chosen.stop - 1})")
+    first = _first_seed(split, seed, episodes, drawn=random)
     policy = load_policy(model)
     agent = ActingPolicy(policy, deterministic=deterministic, resample=acting.resample)
     base = ReachEnv(robot=policy.robot, scenario=scenario, goal_tolerance=goal_tolerance,
                     random_world=RandomWorldConfig(start_clearance=start_clearance), observation=policy.observation)
     env = ActingEnv(base, acting)
     if random:
-        trained = policy.meta.get("state", {}).get("obstacles", {}).get("count", 0)
-        base.set_n_obstacles(trained if n_obstacles is None else n_obstacles)
+        base.set_n_obstacles(_trained_obstacles(policy) if n_obstacles is None else n_obstacles)
     records, sources = [], Counter()
     try:
         for episode in tqdm(range(episodes), desc=f"rollout {scenario}", disable=not progress, leave=False):
@@ -100,6 +95,22 @@ def rollout(
     finally:
         env.close()
     return _summary(records, deterministic, acting, sources, split, random)
+
+
+def _first_seed(split: str, seed: int | None, episodes: int, drawn: bool = True) -> int:
+    """The first world's seed (default: the split's first); where worlds are ``drawn``, the
+    ``episodes`` seeds from it must lie in ``split``."""
+    chosen = get_split(split)
+    first = chosen.start if seed is None else int(seed)
+    if drawn and not (first in chosen and first + episodes - 1 in chosen):
+        raise ValueError(f"seeds {first}..{first + episodes - 1} leave the {split} split "
+                         f"({chosen.start}..{chosen.stop - 1})")
+    return first
+
+
+def _trained_obstacles(policy) -> int:
+    """The obstacle count the policy's training ended at."""
+    return policy.meta.get("state", {}).get("obstacles", {}).get("count", 0)
 
 
 def _summary(records: list[dict], deterministic: bool, acting: ActingConfig, sources: Counter, split: str,
@@ -145,14 +156,10 @@ def rollout_batched(
     from rayreach.env.batched import BatchedReachEnv
     from rayreach.env.reach import EnvConfig, episode_outcome
 
-    chosen = get_split(split)
-    first = chosen.start if seed is None else int(seed)
-    if not (first in chosen and first + episodes - 1 in chosen):
-        raise ValueError(f"seeds {first}..{first + episodes - 1} leave the {split} split "
-                         f"({chosen.start}..{chosen.stop - 1})")
+    first = _first_seed(split, seed, episodes)
     policy = load_policy(model)
     if n_obstacles is None:
-        n_obstacles = policy.meta.get("state", {}).get("obstacles", {}).get("count", 0)
+        n_obstacles = _trained_obstacles(policy)
     config = EnvConfig(goal_tolerance=goal_tolerance, observation=policy.observation,
                        random_world=RandomWorldConfig(n_obstacles=n_obstacles, start_clearance=start_clearance))
     env = BatchedReachEnv(policy.robot, episodes, suite, config=config, seed=first)
