@@ -21,6 +21,7 @@ from rayreach.learning.onnx_export import export_onnx
 from rayreach.learning.policy import load_policy
 from rayreach.planners.drl import shipped_model
 from rayreach.robots.urdf import TOOL_LINK
+from scenes import plate_over_the_tip
 
 
 @pytest.mark.parametrize("robot, scenario", [("ur5", "exp1"), ("kr16", "exp4")])
@@ -165,3 +166,39 @@ def test_controller_refuses_bad_joints_goals_and_order():
         made.reset(made.spec.home, [0.0, 0.5, 0.3], [0, 0, 0], [1, -1, 1])
     with pytest.raises(ValueError, match="trained for 'ur5', not 'kr16'"):
         ArmController("ur5", robot="kr16")
+
+
+def test_a_policy_with_tip_back_rays_reads_them_after_the_129(tmp_path):
+    """A policy observing the tip-back rays: fed the 129 and then the 24 from the simulation,
+    the controller builds the observation the env built and commands the same joints; the
+    129 alone are refused with what it takes."""
+    from rayreach.env.observation import ObservationConfig
+    from rayreach.learning.train import TrainConfig, train
+
+    config = TrainConfig(robot="ur5", timesteps=64, envs=1, n_steps=64, batch_size=64, n_epochs=1,
+                         observation=ObservationConfig(motion=True, tip_back=True))
+    policy = load_policy(train(config, tmp_path))
+    acting = ActingConfig().without("arm_guard")
+    env = ActingEnv(ReachEnv(scenario=plate_over_the_tip(back=0.05, centre_out=0.1, half=0.07),
+                             observation=policy.observation), acting)
+    try:
+        actor = ActingPolicy(policy, resample=acting.resample)
+        actor.reset(0)
+        obs, info = env.reset(seed=0)
+        reach = env.unwrapped
+        controller = ArmController(policy, acting=acting, base_position=reach.scenario.base_position,
+                                   base_rpy=reach.scenario.base_rpy)
+        assert controller.n_readings == 153
+        controller.reset(reach.q, reach.goals[0], reach.scenario.workspace_low, reach.scenario.workspace_high)
+        with pytest.raises(ValueError, match=re.escape("readings must hold the 129 rays, then the 24 tip-back rays")):
+            controller.step(reach.q.copy(), reach._ray_fractions.copy())
+        assert (reach._tip_back_fractions < 1).sum() >= 4  # the plate is in their sight
+        for _ in range(40):
+            step = controller.step(reach.q.copy(), np.r_[reach._ray_fractions, reach._tip_back_fractions])
+            np.testing.assert_allclose(controller.observer.obs[0], obs, atol=1e-6)
+            obs, _, terminated, truncated, info = env.step(actor.act(obs, info))
+            np.testing.assert_allclose(step.q_target, reach.q, atol=1e-12)
+            if terminated or truncated:
+                break
+    finally:
+        env.close()

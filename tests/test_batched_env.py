@@ -201,3 +201,14 @@ def test_progress_round_the_obstacles_steps_as_reach_env_does(robot, scenario):
     rewards = RewardWeights(progress=10.0, progress_around_obstacles=True)
     outcomes = _compare(robot, scenario, 6, 20, max_steps=80, goal_tolerance=0.1, rewards=rewards)
     assert sum(outcomes.values()) >= 20
+
+
+def test_tip_back_rays_step_as_reach_env_does():
+    """Goal-cover worlds, where the tip-back rays see the plate over the goal."""
+    from rayreach.env.observation import ObservationConfig
+    from rayreach.scenarios.random_world import RandomWorldConfig
+
+    observation = ObservationConfig.planner()
+    outcomes = _compare("ur5", "random", 6, 12, max_steps=100, goal_tolerance=0.1, observation=observation,
+                        random_world=RandomWorldConfig(n_obstacles=1, kinds=("goal_cover", "plate")))
+    assert sum(outcomes.values()) >= 12

@@ -7,7 +7,8 @@ import pytest
 
 from rayreach.env.observation import NEAR, WALL_RANGE, ObservationConfig
 from rayreach.env.reach import OBS_SIZE, ReachEnv
-from rayreach.sim.sensors import N_RAYS
+from rayreach.sim.sensors import N_RAYS, N_TIP_BACK
+from scenes import plate_over_the_tip
 
 
 def test_the_default_is_the_papers_observation():
@@ -26,7 +27,7 @@ def test_planner_parts_hold_the_goal_the_walls_the_motion_and_past_scans():
     rng = np.random.default_rng(0)
     try:
         obs, _ = env.reset(seed=5)
-        assert obs.shape == env.observation_space.shape == (OBS_SIZE + 15 + 3 * (N_RAYS + 3),)
+        assert obs.shape == env.observation_space.shape == (OBS_SIZE + 15 + 3 * (N_RAYS + 3) + N_TIP_BACK,)
         rays, ees, last = [env._ray_fractions.copy()], [env.ee_pos.copy()], env.ee_pos.copy()
         low, high = np.asarray(env.scenario.workspace_low), np.asarray(env.scenario.workspace_high)
         for t in range(1, 60):
@@ -52,6 +53,7 @@ def test_planner_parts_hold_the_goal_the_walls_the_motion_and_past_scans():
                 np.testing.assert_allclose(obs[k:k + N_RAYS], rays[then], atol=1e-6, err_msg=f"t={t} scan {back}")
                 np.testing.assert_allclose(obs[k + N_RAYS:k + N_RAYS + 3], ees[then] - env.ee_pos, atol=1e-6)
                 k += N_RAYS + 3
+            np.testing.assert_array_equal(obs[k:], env._tip_back_fractions.astype(np.float32))
         assert np.ptp(np.array(rays), axis=0).max() > 0.05, "the scans should differ for the test to tell them apart"
         obs, _ = env.reset(seed=6)  # a new episode remembers nothing of the last
         k = OBS_SIZE + 15
@@ -78,3 +80,41 @@ def test_set_observation_changes_the_space_from_the_next_reset():
 def test_bad_settings_are_refused(bad):
     with pytest.raises(ValueError, match=next(iter(bad))):
         ObservationConfig(**bad)
+
+
+def test_tip_back_rays_see_a_plate_over_the_tip_as_pybullet_casts_them():
+    """The tip-back part against PyBullet's ``rayTestBatch`` from the tool tip along the
+    rings' directions, built here from the tool's pose: the plate a paper ray sees edge-on
+    is seen from below."""
+    import math
+
+    import pybullet as p
+
+    from rayreach.sim.scene import OBSTACLE_GROUP
+    from rayreach.sim.sensors import TIP_BACK_POLAR
+
+    config = ObservationConfig.planner()
+    env = ReachEnv(scenario=plate_over_the_tip(back=0.05, centre_out=0.1, half=0.07), observation=config)
+    try:
+        obs, _ = env.reset(seed=0)
+        assert obs.shape == env.observation_space.shape == (OBS_SIZE + config.extra_size(N_RAYS),)
+        assert config.extra_size(N_RAYS) == 15 + 3 * 132 + 24
+        seen = obs[-N_TIP_BACK:]
+        local = np.array([[math.sin(math.radians(polar)) * math.cos(math.radians(az)),
+                           math.sin(math.radians(polar)) * math.sin(math.radians(az)), math.cos(math.radians(polar))]
+                          for polar in TIP_BACK_POLAR for az in range(0, 360, 30)])
+        directions = local @ env.ee_rot.T
+        ends = env.ee_pos + env.config.ray_range * directions
+        hits = p.rayTestBatch([env.ee_pos.tolist()] * N_TIP_BACK, ends.tolist(), collisionFilterMask=OBSTACLE_GROUP,
+                              physicsClientId=env.scene.client)
+        expected = np.array([1.0 if h[0] < 0 else h[2] for h in hits])
+        np.testing.assert_allclose(seen, expected, atol=1e-5)
+        # azimuth 0 of each ring points at the plate, whose underside lies 4.8 cm up the tool:
+        # 20 deg back from square meets it 13.2 cm out, 45 deg back 4.8 cm out
+        underside = 0.05 - 0.002
+        np.testing.assert_allclose(seen[[0, 12]], [underside / math.cos(math.radians(70)) / 0.4,
+                                                   underside * math.sqrt(2) / 0.4], atol=1e-4)
+        assert (seen < 1).sum() >= 4 and seen[6] == 1.0 and seen[18] == 1.0  # and nothing on the far side
+    finally:
+        env.close()
+

@@ -43,7 +43,7 @@ def _observations(policy, envs, n, seed=0, max_steps=150):
 
 
 def _planner_bundle(path):
-    """A fresh PPO on the 553-value planner observation with the project's network, its
+    """A fresh PPO on the 577-value planner observation with the project's network, its
     action head scaled so that actions leave [-1, 1] (the clip is exercised), and a frozen
     normalisation with uneven mean and variance (some values clipped at +-5)."""
     import torch
@@ -112,8 +112,8 @@ def test_onnx_action_equals_torch_action(cases, name):
 
 def test_planner_graph_folds_clipping_and_its_metadata(cases):
     policy, graph, obs = cases["planner"]
-    assert obs.shape[1] == 553 and graph.robot == "ur5" and graph.observation == ObservationConfig.planner()
-    assert graph.meta["timesteps"] == 0 and graph.meta["obs_shape"] == [553]
+    assert obs.shape[1] == 577 and graph.robot == "ur5" and graph.observation == ObservationConfig.planner()
+    assert graph.meta["timesteps"] == 0 and graph.meta["obs_shape"] == [577]
     normalized = (obs - policy.normalization.mean) / np.sqrt(policy.normalization.var + 1e-8)
     assert np.abs(normalized).max() > 5.0  # the normalisation's clip was needed
     actions = graph.act(obs)

@@ -448,3 +448,21 @@ def test_the_printed_layout_is_the_one_the_rays_are_cast_from(robot, rigs, capsy
                                origins, atol=2e-6)
     np.testing.assert_allclose(np.array([r["direction_flange"] for r in rows]) @ flange[:3, :3].T, directions,
                                atol=2e-6)
+
+
+def test_layout_rows_with_tip_back_list_its_rays_after_the_129():
+    """``rayreach rays --tip-back``: rays 129-152 start at the tool tip and look back
+    towards the flange (negative z in the flange frame), 110 and 135 degrees off the axis."""
+    from rayreach.robots import get_robot
+    from rayreach.sim.sensors import N_TIP_BACK, layout_rows
+
+    spec = get_robot("ur5")
+    rows = layout_rows(spec, tip_back=True)
+    assert [r["index"] for r in rows] == list(range(N_RAYS + N_TIP_BACK))
+    assert layout_rows(spec) == rows[:N_RAYS]
+    back = rows[N_RAYS:]
+    assert {r["sensor"] for r in back} == {"tip-back"}
+    for r in back:
+        np.testing.assert_allclose(r["origin_flange"], [0.0, 0.0, spec.tool.length], atol=1e-6)
+    z = np.array([r["direction_flange"][2] for r in back])
+    np.testing.assert_allclose(z, np.repeat(np.cos(np.radians([110.0, 135.0])), 12), atol=1e-6)

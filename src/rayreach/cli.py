@@ -14,7 +14,8 @@ EVAL_PLANNERS = "drl,rrt,ncrrt,ompl-rrt,ompl-rrtconnect"
 TRAIN_RECIPES = ("default", "baseline", "paper")
 """``rayreach.learning.train.RECIPES``' names (that module imports torch's stack)."""
 COMPARE_VARIANTS = ("baseline", "default", "paper", "paper-observation", "no-scans", "no-workspace", "entropy",
-                    "around-obstacles", "proximity")
+                    "around-obstacles", "proximity", "gamma-0.995", "gamma-0.998",
+                    "no-tip-back")
 """``rayreach.evaluate.compare_recipes.VARIANTS``' names."""
 ROBOT_HELP = " or ".join(ROBOTS)
 
@@ -298,6 +299,8 @@ def build_parser() -> argparse.ArgumentParser:
     rays.add_argument("--robot", default="ur5", help=ROBOT_HELP)
     rays.add_argument("--json", action="store_true", help="print one JSON list, one object per ray")
     rays.add_argument("--plot", type=Path, default=None, metavar="PNG", help="also draw the layout to this file")
+    rays.add_argument("--tip-back", action="store_true",
+                      help="also the 24 tip-back rays (129-152) that a policy of the default recipe reads")
 
     demo = sub.add_parser("demo", help="a scripted episode on exp1, drawn to a PNG")
     demo.add_argument("--scenario", default="exp1")
@@ -764,7 +767,7 @@ def _rays(args: argparse.Namespace) -> int:
     from rayreach.sim.sensors import RAY_RANGE, layout_rows
 
     spec = get_robot(args.robot)
-    rows = layout_rows(spec)
+    rows = layout_rows(spec, tip_back=args.tip_back)
     if args.plot is not None:
         from rayreach.evaluate.ray_layout import ray_layout_figure
 

@@ -45,7 +45,7 @@ from rayreach.env.rewards import RewardWeights
 from rayreach.robots import RobotSpec, get_robot
 from rayreach.robots.urdf import TOOL_LINK
 from rayreach.sim.kinematics import STEP_IK, IKParams, IKResult, Kinematics
-from rayreach.sim.sensors import N_RAYS, RAY_RANGE, RayModel
+from rayreach.sim.sensors import N_RAYS, N_TIP_BACK, RAY_RANGE, RayModel
 
 UNITS = ("fraction", "m")
 """How ray readings may come: hit fractions of the range in [0, 1], or metres."""
@@ -114,6 +114,9 @@ class ArmController:
                                                                     RewardWeights(), capsules)
         self.actor = ActingPolicy(self.policy, deterministic=True, resample=acting.resample)
         self.observer = Observer(self.policy.observation, 1, N_RAYS, OBS_SIZE, self.spec.ee_step)
+        self.n_readings = N_RAYS + N_TIP_BACK * self.policy.observation.tip_back
+        """Ray readings a step takes: the paper's 129, then the 24 tip-back rays where the
+        policy observes them (``rayreach rays --tip-back``); the acting layers read the 129."""
         self.step_scale = np.array([self.spec.ee_step] * 3 + [self.spec.rot_step] * 3)
         self.seed = seed
         self._goal: np.ndarray | None = None
@@ -141,13 +144,15 @@ class ArmController:
         self.actor.reset(self.seed if seed is None else seed)
 
     def step(self, q: np.ndarray, readings: np.ndarray, unit: str = "fraction") -> ControlStep:
-        """The next joint target from the measured joints ``q`` (rad) and the 129 ray
-        ``readings`` (``unit``: ``fraction`` of the range, 1 for nothing seen, or ``m``, where
+        """The next joint target from the measured joints ``q`` (rad) and the ray
+        ``readings`` (``n_readings``: the 129, then the tip-back ones where the policy has them) (``unit``: ``fraction`` of the range, 1 for nothing seen, or ``m``, where
         anything at or beyond the range reads as nothing seen)."""
         if self._goal is None:
             raise RuntimeError("call reset(q, goal) before step()")
         q = self._q_checked(q)
         fractions = self._fractions(readings, unit)
+        tip_back = fractions[None, N_RAYS:] if self.policy.observation.tip_back else None
+        fractions = fractions[:N_RAYS]
         frames = self.kin.frames(q)
         ee = self.kin.ee_from_frames(frames)
         ee_pos, ee_rot = ee[:3, 3].copy(), ee[:3, :3].copy()
@@ -158,7 +163,7 @@ class ArmController:
         distance = float(np.linalg.norm(self._goal - ee_pos))
         first = self._episode is None
         base = paper_observation(q, self._goal, ee_pos, ee_rot, self._ref_rot_t, distance, fractions)[None]
-        args = (ONE_WORLD, base, ee_pos[None], fractions[None], self._low[None], self._high[None])
+        args = (ONE_WORLD, base, ee_pos[None], fractions[None], self._low[None], self._high[None], tip_back)
         if first:
             memory = RayMemory()
             memory.add(now, moved=True)
@@ -209,9 +214,10 @@ class ArmController:
         if unit not in UNITS:
             raise ValueError(f"unknown unit '{unit}'; valid: {', '.join(UNITS)}")
         r = np.array(readings, dtype=float).reshape(-1)  # a copy, as in _vector
-        if r.shape != (N_RAYS,):
-            raise ValueError(f"readings must hold the {N_RAYS} rays in the layout's order (docs/rays.md), got "
-                             f"{np.asarray(readings).shape}")
+        if r.shape != (self.n_readings,):
+            what = f"{N_RAYS} rays, then the {N_TIP_BACK} tip-back rays" if self.n_readings > N_RAYS else f"{N_RAYS} rays"
+            raise ValueError(f"readings must hold the {what} in the layout's order (docs/rays.md, rayreach rays), "
+                             f"got {np.asarray(readings).shape}")
         if not np.all(np.isfinite(r)) or np.any(r < 0):
             bad = np.flatnonzero(~np.isfinite(r) | (r < 0))
             raise ValueError(f"ray readings must be finite and >= 0; rays {bad.tolist()[:10]} are not")

@@ -55,7 +55,7 @@ from rayreach.sim.batch_obstacles import ObstacleBatch
 from rayreach.sim.batch_rays import RayArrays, cast_worlds
 from rayreach.sim.kinematics import Kinematics
 from rayreach.sim.scene import Scene
-from rayreach.sim.sensors import N_RAYS, RayModel
+from rayreach.sim.sensors import N_RAYS, N_TIP_BACK, RayModel, tip_back_layout
 
 SHAKE_WINDOW = ShakeCounter().window
 """Movements the shaking counter compares."""
@@ -95,6 +95,8 @@ class BatchedReachEnv(VecEnv):
         base_rpy = fixed.base_rpy if fixed else None
         self.kin = Kinematics(spec, base_pos, base_rpy)
         self.layout = RayArrays.of(RayModel(spec, cfg.ray_range))
+        self.tip_back_layout = (RayArrays.of(RayModel(spec, cfg.ray_range, tip_back_layout(spec)))
+                                if cfg.observation.tip_back else None)
         self.collision = CollisionWorlds(spec, n_worlds, base_pos, base_rpy)
         self.spheres = self.collision.spheres
         self.samplers = [world_sampler(str(scenario), self.kin, self.collision.slot(i), cfg.random_world)
@@ -134,6 +136,7 @@ class BatchedReachEnv(VecEnv):
         self.shake_queue = np.zeros((n, SHAKE_WINDOW + 1))
         self.shake_length = np.zeros(n, dtype=np.int64)
         self.fractions = np.ones((n, N_RAYS))
+        self.tip_back_fractions = np.ones((n, N_TIP_BACK))
         self.episode_terms = np.zeros((n, len(REWARD_TERM_NAMES)))
         self.converged = np.ones(n, dtype=bool)
         self.base_obs = np.zeros((n, OBS_SIZE), dtype=np.float32)
@@ -229,7 +232,7 @@ class BatchedReachEnv(VecEnv):
         self.previous_distance[i] = float(np.linalg.norm(self.goals[i, 0] - self.ee_pos[i]))
         which = np.array([i])
         self.previous_way[i] = self._ways(which, self.previous_distance)[0]
-        cast_worlds(self.layout, self.frames, self.obstacles, cfg.ray_range, which, self.fractions)
+        self._cast(which)
         self._observe(which, self.previous_distance)
         self.observer.reset(which, *self._observer_args(which))
 
@@ -266,7 +269,7 @@ class BatchedReachEnv(VecEnv):
         reached = distance < self.tolerance
         n_shakes = _shake(self.shake_queue, self.shake_length, distance, SHAKE_WINDOW)
         clock.lap("reward_and_obs")
-        cast_worlds(self.layout, self.frames, self.obstacles, cfg.ray_range, self._all, self.fractions)
+        self._cast(self._all)
         clock.lap("rays")
 
         final_goal = self.goal_index == self.n_goals - 1
@@ -350,10 +353,18 @@ class BatchedReachEnv(VecEnv):
         """Each world's current scenario (drawn at its last reset, or the fixed one)."""
         return [s for s in self._scenarios if s is not None]
 
+    def _cast(self, which: np.ndarray) -> None:
+        """Worlds ``which``'s ray fractions (and tip-back ones, where the observation has them)."""
+        cfg = self.config
+        cast_worlds(self.layout, self.frames, self.obstacles, cfg.ray_range, which, self.fractions)
+        if self.tip_back_layout is not None:
+            cast_worlds(self.tip_back_layout, self.frames, self.obstacles, cfg.ray_range, which,
+                        self.tip_back_fractions)
+
     def _observer_args(self, which: np.ndarray) -> tuple:
         """Worlds ``which``'s rows of ``Observer.reset``'s and ``step``'s arguments after ``which``."""
         return (self.base_obs[which], self.ee_pos[which], self.fractions[which], self.ws_low[which],
-                self.ws_high[which])
+                self.ws_high[which], self.tip_back_fractions[which] if self.tip_back_layout is not None else None)
 
     def _observe(self, which: np.ndarray, distance: np.ndarray) -> None:
         """The paper's 142 values of worlds ``which`` into ``base_obs``."""

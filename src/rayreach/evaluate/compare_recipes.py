@@ -44,6 +44,9 @@ VARIANTS: dict[str, tuple[str, dict[str, Any]]] = {
     "entropy": ("default", {"ent_coef": 0.005}),
     "around-obstacles": ("default", {"progress_around_obstacles": True}),
     "proximity": ("default", {"proximity_weight": -0.1}),
+    "gamma-0.995": ("default", {"gamma": 0.995}),
+    "gamma-0.998": ("default", {"gamma": 0.998}),
+    "no-tip-back": ("default", {"observation": replace(ObservationConfig.planner(), tip_back=False)}),
 }
 """What can be compared: a recipe, or a recipe with one change (its ablation)."""
 

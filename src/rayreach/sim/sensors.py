@@ -40,6 +40,9 @@ RAY_RANGE = 0.4
 """Sensor range in metres (paper: 0.4 m for every sensor)."""
 N_RAYS = 129
 SENSOR_SLICES = {"wrist": slice(0, 24), "wraparound": slice(24, 104), "tip": slice(104, 129)}
+TIP_BACK_POLAR = (110.0, 135.0)
+"""Polar angles from the tool's axis, deg, of the two rings of ``tip_back_layout``."""
+N_TIP_BACK = 12 * len(TIP_BACK_POLAR)
 
 
 @dataclass(frozen=True)
@@ -78,16 +81,31 @@ def ray_layout(spec: RobotSpec) -> list[RayGroup]:
     return [wrist, wrap, tip]
 
 
+def tip_back_layout(spec: RobotSpec) -> list[RayGroup]:
+    """Rays beside the paper's 129, an option of the observation
+    (``ObservationConfig.tip_back``): two rings of 12 from the tool tip that open back
+    towards the arm (``TIP_BACK_POLAR``). Every paper ray looks down the tool or out from
+    it, so a flat plate a few centimetres over the goal, edge-on to the wraparound rays,
+    is seen by at most three rays before the tool hits it (docs/training.md); these see its
+    underside."""
+    dirs = np.concatenate([_cone(polar, 12, 30) for polar in TIP_BACK_POLAR])
+    return [RayGroup("tool", np.tile([0.0, 0.0, spec.tool.length], (len(dirs), 1)), dirs)]
+
+
 def mount_offset(mount: SensorMount) -> np.ndarray:
     return pose_matrix(mount.xyz, rpy_to_matrix(mount.rpy))
 
 
-def layout_rows(spec: RobotSpec) -> list[dict]:
+def layout_rows(spec: RobotSpec, tip_back: bool = False) -> list[dict]:
     """Every ray in observation order, as a user mounts or emulates it: its sensor, the mount's
     link and chain frame, its origin and unit direction in the mount frame and in the flange
-    frame (chain frame n, the tool's axis along +z)."""
+    frame (chain frame n, the tool's axis along +z). ``tip_back``: then the tip-back rays
+    (indices from 129), which a policy with ``ObservationConfig.tip_back`` reads too."""
     rows = []
-    for group, (sensor, block) in zip(ray_layout(spec), SENSOR_SLICES.items()):
+    groups = list(zip(ray_layout(spec), SENSOR_SLICES.items()))
+    if tip_back:
+        groups.append((tip_back_layout(spec)[0], ("tip-back", slice(N_RAYS, N_RAYS + N_TIP_BACK))))
+    for group, (sensor, block) in groups:
         mount = spec.mounts[group.mount]
         if mount.frame != spec.n_joints:
             raise ValueError(f"mount '{group.mount}' of {spec.name} sits on chain frame {mount.frame}, not on the "
@@ -105,9 +123,10 @@ def layout_rows(spec: RobotSpec) -> list[dict]:
 class RayModel:
     """Turns chain frames into world ray origins and end points for one robot."""
 
-    def __init__(self, spec: RobotSpec, ray_range: float = RAY_RANGE) -> None:
+    def __init__(self, spec: RobotSpec, ray_range: float = RAY_RANGE, groups: list[RayGroup] | None = None) -> None:
+        """``groups``: the rays (default: the paper's 129, ``ray_layout``)."""
         self.ray_range = ray_range
-        groups = ray_layout(spec)
+        groups = ray_layout(spec) if groups is None else groups
         self.n_rays = sum(len(g.origins) for g in groups)
         # one block per mount (rays of a mount move together), each (frame, offset, rows,
         # local origins (n, 3), local directions (3, n)); rows keep the observation order

@@ -1,0 +1,26 @@
+"""Constructed scenes for the tests."""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def plate_over_the_tip(back: float, centre_out: float, half: float):
+    """UR5 at its home joints with a flat plate ``back`` m up the tool from its tip, square
+    to the tool's axis, its centre ``centre_out`` m out along the tool frame's x (a plate
+    just over the goal, as a goal-cover world has it)."""
+    from rayreach.robots import get_robot
+    from rayreach.scenarios.random_world import drawn_scenario
+    from rayreach.scenarios.schema import ObstacleSpec
+    from rayreach.sim.kinematics import Kinematics
+    from rayreach.sim.transforms import matrix_to_rpy
+
+    spec = get_robot("ur5")
+    tip = Kinematics(spec).fk(np.asarray(spec.home))
+    axis, out = tip[:3, 2], tip[:3, 0]
+    centre = tip[:3, 3] - back * axis + centre_out * out
+    plate = ObstacleSpec("box", tuple(centre), rpy=tuple(matrix_to_rpy(tip[:3, :3])), half_extents=(half, half, 0.002),
+                         name="plate_0")
+    return drawn_scenario("plate", "ur5", np.asarray(spec.home), tip[:3, 3] + 0.3 * out, [plate],
+                          spec.workspace_low, spec.workspace_high, "a plate over the tool's tip")
+
