@@ -26,7 +26,7 @@ from rayreach.env.reach import ReachEnv  # noqa: E402
 from rayreach.learning.policy import load_policy  # noqa: E402
 from rayreach.planners.drl import resolve_model  # noqa: E402
 from rayreach.scenarios.random_world import KINDS, RandomWorldConfig  # noqa: E402
-from rayreach.sim.sensors import SENSOR_SLICES, RayModel, tip_back_layout  # noqa: E402
+from rayreach.sim.sensors import SENSOR_SLICES, RayModel  # noqa: E402
 
 VALIDATION = 1_000_000
 """The validation split's first seed."""
@@ -37,7 +37,7 @@ def rays_before_collisions(model: str, kind: str, episodes: int, window: int) ->
     policy = load_policy(resolve_model(model))
     env = ReachEnv(robot=policy.robot, scenario="random", goal_tolerance=0.01,
                    random_world=RandomWorldConfig(n_obstacles=1, kinds=(kind,)), observation=policy.observation)
-    tip_back = RayModel(env.spec_robot, env.config.ray_range, tip_back_layout(env.spec_robot))
+    tip_back = RayModel.tip_back(env.spec_robot, env.config.ray_range)
     found = []
     try:
         for k in range(episodes):
@@ -47,7 +47,8 @@ def rays_before_collisions(model: str, kind: str, episodes: int, window: int) ->
             while not done:
                 obs, _, terminated, truncated, info = env.step(policy.act(obs[None], deterministic=True)[0])
                 done = terminated or truncated
-                row = {name: int((env._ray_fractions[block] < 1).sum()) for name, block in SENSOR_SLICES.items()}
+                fractions = env.perceive().fractions
+                row = {name: int((fractions[block] < 1).sum()) for name, block in SENSOR_SLICES.items()}
                 back = env.caster.cast(*tip_back.world_rays(env.frames), env.config.ray_range)
                 row["tip-back"] = int((back < 1).sum())
                 seen.append(row)

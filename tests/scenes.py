@@ -23,4 +23,3 @@ def plate_over_the_tip(back: float, centre_out: float, half: float):
                          name="plate_0")
     return drawn_scenario("plate", "ur5", np.asarray(spec.home), tip[:3, 3] + 0.3 * out, [plate],
                           spec.workspace_low, spec.workspace_high, "a plate over the tool's tip")
-

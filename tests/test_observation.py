@@ -117,4 +117,3 @@ def test_tip_back_rays_see_a_plate_over_the_tip_as_pybullet_casts_them():
         assert (seen < 1).sum() >= 4 and seen[6] == 1.0 and seen[18] == 1.0  # and nothing on the far side
     finally:
         env.close()
-

@@ -144,9 +144,10 @@ class ArmController:
         self.actor.reset(self.seed if seed is None else seed)
 
     def step(self, q: np.ndarray, readings: np.ndarray, unit: str = "fraction") -> ControlStep:
-        """The next joint target from the measured joints ``q`` (rad) and the ray
-        ``readings`` (``n_readings``: the 129, then the tip-back ones where the policy has them) (``unit``: ``fraction`` of the range, 1 for nothing seen, or ``m``, where
-        anything at or beyond the range reads as nothing seen)."""
+        """The next joint target from the measured joints ``q`` (rad) and the ``n_readings``
+        ray ``readings``: the 129, then the tip-back ones where the policy has them
+        (``unit``: ``fraction`` of the range, 1 for nothing seen, or ``m``, where anything
+        at or beyond the range reads as nothing seen)."""
         if self._goal is None:
             raise RuntimeError("call reset(q, goal) before step()")
         q = self._q_checked(q)
@@ -215,7 +216,7 @@ class ArmController:
             raise ValueError(f"unknown unit '{unit}'; valid: {', '.join(UNITS)}")
         r = np.array(readings, dtype=float).reshape(-1)  # a copy, as in _vector
         if r.shape != (self.n_readings,):
-            what = f"{N_RAYS} rays, then the {N_TIP_BACK} tip-back rays" if self.n_readings > N_RAYS else f"{N_RAYS} rays"
+            what = f"{N_RAYS} rays" + (f", then the {N_TIP_BACK} tip-back rays" if self.n_readings > N_RAYS else "")
             raise ValueError(f"readings must hold the {what} in the layout's order (docs/rays.md, rayreach rays), "
                              f"got {np.asarray(readings).shape}")
         if not np.all(np.isfinite(r)) or np.any(r < 0):

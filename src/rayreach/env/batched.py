@@ -55,7 +55,7 @@ from rayreach.sim.batch_obstacles import ObstacleBatch
 from rayreach.sim.batch_rays import RayArrays, cast_worlds
 from rayreach.sim.kinematics import Kinematics
 from rayreach.sim.scene import Scene
-from rayreach.sim.sensors import N_RAYS, N_TIP_BACK, RayModel, tip_back_layout
+from rayreach.sim.sensors import N_RAYS, N_TIP_BACK, RayModel
 
 SHAKE_WINDOW = ShakeCounter().window
 """Movements the shaking counter compares."""
@@ -95,8 +95,8 @@ class BatchedReachEnv(VecEnv):
         base_rpy = fixed.base_rpy if fixed else None
         self.kin = Kinematics(spec, base_pos, base_rpy)
         self.layout = RayArrays.of(RayModel(spec, cfg.ray_range))
-        self.tip_back_layout = (RayArrays.of(RayModel(spec, cfg.ray_range, tip_back_layout(spec)))
-                                if cfg.observation.tip_back else None)
+        self.tip_back_layout = (RayArrays.of(RayModel.tip_back(spec, cfg.ray_range)) if cfg.observation.tip_back
+                                else None)
         self.collision = CollisionWorlds(spec, n_worlds, base_pos, base_rpy)
         self.spheres = self.collision.spheres
         self.samplers = [world_sampler(str(scenario), self.kin, self.collision.slot(i), cfg.random_world)
@@ -363,8 +363,9 @@ class BatchedReachEnv(VecEnv):
 
     def _observer_args(self, which: np.ndarray) -> tuple:
         """Worlds ``which``'s rows of ``Observer.reset``'s and ``step``'s arguments after ``which``."""
+        tip_back = self.tip_back_fractions[which] if self.tip_back_layout is not None else None
         return (self.base_obs[which], self.ee_pos[which], self.fractions[which], self.ws_low[which],
-                self.ws_high[which], self.tip_back_fractions[which] if self.tip_back_layout is not None else None)
+                self.ws_high[which], tip_back)
 
     def _observe(self, which: np.ndarray, distance: np.ndarray) -> None:
         """The paper's 142 values of worlds ``which`` into ``base_obs``."""

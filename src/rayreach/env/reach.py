@@ -74,7 +74,7 @@ from rayreach.scenarios.random_world import RandomWorldConfig
 from rayreach.scenarios.suites import suite_workspace, world_sampler
 from rayreach.sim.kinematics import STEP_IK, IKParams, IKResult, Kinematics
 from rayreach.sim.scene import Scene
-from rayreach.sim.sensors import N_RAYS, RAY_RANGE, RayModel, tip_back_layout
+from rayreach.sim.sensors import N_RAYS, RAY_RANGE, RayModel
 
 REWARD_TERM_NAMES = ("success", "collision", "distance", "shaking", "out_of_bounds", "exhausted", "progress",
                      "proximity")
@@ -235,8 +235,7 @@ class ReachEnv(gym.Env):
         self.config = make_config(self.config, {"observation": observation})
         self.observer = Observer(observation, 1, N_RAYS, OBS_SIZE, self.spec_robot.ee_step)
         self.observation_space = self.observer.space(self._paper_space)
-        self._tip_back = (RayModel(self.spec_robot, self.config.ray_range, tip_back_layout(self.spec_robot))
-                          if observation.tip_back else None)
+        self._tip_back = RayModel.tip_back(self.spec_robot, self.config.ray_range) if observation.tip_back else None
         self._ready = False
 
     def set_n_obstacles(self, n: int) -> None:
@@ -403,7 +402,8 @@ class ReachEnv(gym.Env):
         self._ray_fractions = self.caster.cast(self._ray_origins, self._ray_directions, self.config.ray_range)
         self._ray_lengths = self._ray_fractions * self.config.ray_range  # the range where nothing is seen
         if self._tip_back is not None:
-            self._tip_back_fractions = self.caster.cast(*self._tip_back.world_rays(self.frames), self.config.ray_range)
+            self._tip_back_fractions = self.caster.cast(*self._tip_back.world_rays(self.frames),
+                                                        self.config.ray_range)
         return self._ray_fractions
 
     def perceive(self) -> Perception:

@@ -85,9 +85,9 @@ def tip_back_layout(spec: RobotSpec) -> list[RayGroup]:
     """Rays beside the paper's 129, an option of the observation
     (``ObservationConfig.tip_back``): two rings of 12 from the tool tip that open back
     towards the arm (``TIP_BACK_POLAR``). Every paper ray looks down the tool or out from
-    it, so a flat plate a few centimetres over the goal, edge-on to the wraparound rays,
-    is seen by at most three rays before the tool hits it (docs/training.md); these see its
-    underside."""
+    it, so a flat plate a few centimetres over the goal lies edge-on to the wraparound rays
+    (0-4 of the 104 wrist and wraparound rays saw one before the tool hit it,
+    docs/training.md); these see its underside."""
     dirs = np.concatenate([_cone(polar, 12, 30) for polar in TIP_BACK_POLAR])
     return [RayGroup("tool", np.tile([0.0, 0.0, spec.tool.length], (len(dirs), 1)), dirs)]
 
@@ -144,6 +144,11 @@ class RayModel:
             m = spec.mounts[mount]
             block = slice(rows[0], rows[-1] + 1)
             self._blocks.append((m.frame, mount_offset(m), block, all_o[block], all_d[block].T.copy()))
+
+    @classmethod
+    def tip_back(cls, spec: RobotSpec, ray_range: float = RAY_RANGE) -> "RayModel":
+        """The tip-back rays (``tip_back_layout``) in place of the paper's."""
+        return cls(spec, ray_range, tip_back_layout(spec))
 
     def world_rays(self, frames: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """World origins and unit directions, each (n_rays, 3), from the robot's chain frames."""
