@@ -36,6 +36,10 @@ def test_variants_change_one_thing_of_their_recipe():
         changed = [f.name for f in fields(default) if getattr(variant(name, "kr16"), f.name) != getattr(default, f.name)]
         assert len(changed) == 1, (name, changed)
     assert variant("no-scans", "ur5").observation.scans == 0 and variant("paper-observation", "ur5").observation.is_paper
+    # the tip-back rays are in the UR5's default and out of the KR16's; each variant sets them for both robots
+    assert recipe("default", robot="ur5").observation.tip_back and not default.observation.tip_back
+    for robot in ("ur5", "kr16"):
+        assert variant("tip-back", robot).observation.tip_back and not variant("no-tip-back", robot).observation.tip_back
     task = fixed_task(variant("entropy", "ur5"), goal=0.01, obstacles=2)
     assert (task.goal.rho, task.obstacles.start, task.ent_coef) == (0.01, 2, 0.005)
     with pytest.raises(ValueError, match="paper-observation"):

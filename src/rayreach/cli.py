@@ -15,7 +15,7 @@ TRAIN_RECIPES = ("default", "baseline", "paper")
 """``rayreach.learning.train.RECIPES``' names (that module imports torch's stack)."""
 COMPARE_VARIANTS = ("baseline", "default", "paper", "paper-observation", "no-scans", "no-workspace", "entropy",
                     "around-obstacles", "proximity", "gamma-0.995", "gamma-0.998",
-                    "no-tip-back")
+                    "tip-back", "no-tip-back")
 """``rayreach.evaluate.compare_recipes.VARIANTS``' names."""
 ROBOT_HELP = " or ".join(ROBOTS)
 

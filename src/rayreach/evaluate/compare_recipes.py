@@ -46,6 +46,7 @@ VARIANTS: dict[str, tuple[str, dict[str, Any]]] = {
     "proximity": ("default", {"proximity_weight": -0.1}),
     "gamma-0.995": ("default", {"gamma": 0.995}),
     "gamma-0.998": ("default", {"gamma": 0.998}),
+    "tip-back": ("default", {"observation": replace(ObservationConfig.planner(), tip_back=True)}),
     "no-tip-back": ("default", {"observation": replace(ObservationConfig.planner(), tip_back=False)}),
 }
 """What can be compared: a recipe, or a recipe with one change (its ablation)."""
