@@ -45,7 +45,7 @@ def test_controller_commands_what_the_acting_env_does(robot, scenario):
             step = controller.step(reach.q.copy(), reach._ray_fractions.copy())
             obs, _, terminated, truncated, info = env.step(actor.act(obs, info))
             np.testing.assert_allclose(step.q_target, reach.q, atol=1e-12)
-            assert step.source == info["acting"]["source"]
+            assert (step.source, step.held_by) == (info["acting"]["source"], info["acting"]["held_by"])
             sources.add(step.source)
             if terminated or truncated:
                 break

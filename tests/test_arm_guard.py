@@ -200,7 +200,7 @@ def test_a_refused_step_is_taken_shorter_where_that_keeps_the_clearance():
     A deterministic policy would otherwise repeat the refused step until its budget ran out."""
     moved, acting = _walk_beside(+1.0, gap=0.023)
     assert 0.005 * min(SHORTER) - 5e-4 < moved < 0.005 * max(SHORTER) + 5e-4
-    assert acting == [{"source": "policy", "proposed": "policy", "held": False}]
+    assert acting == [{"source": "policy", "proposed": "policy", "held": False, "held_by": ""}]
     assert _step_beside(+1.0, gap=0.035) == pytest.approx(0.005, abs=5e-4)  # far enough: the whole step
 
 
@@ -265,7 +265,7 @@ def test_a_held_arm_does_not_forget_what_holds_it():
     steps counted; they do not, so the arm stays held, and each step says so."""
     moved, acting = _walk_beside(+1.0, steps=5, memory=1)
     assert moved == 0.0
-    assert acting == [{"source": "held", "proposed": "policy", "held": True}] * 5
+    assert acting == [{"source": "held", "proposed": "policy", "held": True, "held_by": "arm_guard"}] * 5
 
 
 def test_the_arm_rule_refuses_and_reports_the_arm_held_where_it_is_on():
@@ -273,10 +273,10 @@ def test_the_arm_rule_refuses_and_reports_the_arm_held_where_it_is_on():
     rule refuses the step and every shorter share, the arm holds still and ``info`` says
     so; the same scene with the rule switched off by name takes the whole step."""
     moved, acting = _walk_beside(+1.0)
-    assert moved == 0.0 and acting == [{"source": "held", "proposed": "policy", "held": True}]
+    assert moved == 0.0 and acting == [{"source": "held", "proposed": "policy", "held": True, "held_by": "arm_guard"}]
     moved, acting = _walk_beside(+1.0, without=("arm_guard",))
     assert moved == pytest.approx(0.005, abs=5e-4)
-    assert acting == [{"source": "policy", "proposed": "policy", "held": False}]
+    assert acting == [{"source": "policy", "proposed": "policy", "held": False, "held_by": ""}]
 
 
 def test_arm_rule_settings_are_checked():

@@ -275,7 +275,7 @@ def test_an_unconverged_ik_step_towards_what_the_rays_see_is_not_taken(converged
         else:
             np.testing.assert_array_equal(reach.q, q)
             np.testing.assert_array_equal(reach.ee_pos, before)
-            assert info["acting"]["source"] == "held"
+            assert info["acting"]["source"] == "held" and info["acting"]["held_by"] == "shield"
     finally:
         env.close()
 
@@ -468,6 +468,7 @@ def test_a_plate_in_front_of_the_tool_holds_the_push_and_the_slide_takes_over():
     first = int(np.argmax(moved < 1e-6))
     assert 1 <= first < 8 and np.all(moved[:first] > 0.004) and np.all(moved[first:] < 1e-6)
     assert all(a["source"] in ("policy", "held") and a["proposed"] == "policy" for a in acting)
+    assert all(a["held_by"] == "shield" for a in acting if a["held"])  # the push cut to nothing
     steps, info = _push_into_a_box(ActingConfig().without("final_approach", "detour", "arm_guard", "resample"))
     acting = info["steps_acting"]
     assert steps == 60 and not info["collision"]

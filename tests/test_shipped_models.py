@@ -142,12 +142,14 @@ def test_rollout_counts_outcomes_and_sources_per_world_kind():
     base.set_n_obstacles(policy.meta["state"]["obstacles"]["count"])
     expected: dict[str, dict[str, int]] = {}
     sources: Counter = Counter()
+    held: Counter = Counter()
     first = get_split("validation").start
     try:
         for episode in range(4):
             agent.reset(first + episode)
             run = run_episode(env, agent.act, first + episode)
             sources.update(run.sources)
+            held.update(run.held_by)
             for kind in world_kinds(base.scenario):
                 counts = expected.setdefault(kind, {"episodes": 0, "success": 0, "collision": 0,
                                                     "out_of_bounds": 0, "timeout": 0})
@@ -157,6 +159,9 @@ def test_rollout_counts_outcomes_and_sources_per_world_kind():
         env.close()
     assert summary.by_kind == dict(sorted(expected.items()))
     assert summary.acting_share == share(sources) and sum(summary.acting_share.values()) == pytest.approx(1.0)
+    # every held step is told by what held it, and those shares add up to the held share
+    assert sum(held.values()) == sources["held"] and set(held) <= {"shield", "arm_guard", "still"}
+    assert sum(summary.held_by.values()) == pytest.approx(summary.acting_share.get("held", 0.0))
 
 
 def test_batched_rollout_plays_the_worlds_rollout_plays():

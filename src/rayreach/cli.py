@@ -702,6 +702,8 @@ def _rollout(args: argparse.Namespace, scenario: str) -> int:
           f"mean steps {summary.steps_mean:.0f}")
     print("outcomes: " + ", ".join(f"{k.replace('_', ' ')} {v}" for k, v in summary.outcomes.items()))
     print("steps by source: " + ", ".join(f"{k.replace('_', ' ')} {v:.1%}" for k, v in summary.acting_share.items()))
+    if summary.held_by:
+        print("steps held by: " + ", ".join(f"{k.replace('_', ' ')} {v:.1%}" for k, v in summary.held_by.items()))
     for kind, counts in summary.by_kind.items():  # random worlds: which kinds of world fail
         n = counts["episodes"]
         print(f"  {kind:>13}: {n:4d} worlds, " + ", ".join(

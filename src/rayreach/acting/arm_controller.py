@@ -37,7 +37,7 @@ from rayreach.acting.arm_guard import ChainCapsules
 from rayreach.acting.config import ActingConfig
 from rayreach.acting.layers import acting_components
 from rayreach.acting.memory import RayMemory
-from rayreach.acting.pipeline import Episode, choose
+from rayreach.acting.pipeline import Episode, choose, held_by
 from rayreach.acting.resample import ActingPolicy
 from rayreach.env.observation import OBS_SIZE, ONE_WORLD, Observer, paper_observation
 from rayreach.env.perception import Perception
@@ -67,6 +67,8 @@ class ControlStep:
     """The tip is within the goal tolerance: the query is done."""
     outside: bool
     """The tip has left the workspace: the controller holds the arm and the query has failed."""
+    held_by: str = ""
+    """Where a step of the pipeline held the arm: what held it (``rayreach.acting.pipeline.held_by``)."""
 
 
 def load_controller_policy(policy: Any) -> Any:
@@ -193,7 +195,7 @@ class ArmController:
         self._taken = chosen.taken
         self._held = not chosen.taken or np.array_equal(target, q)
         return ControlStep(target, "held" if self._held else chosen.command.source, self._held, distance, False,
-                           False)
+                           False, held_by(chosen) if self._held else "")
 
     # ------------------------------------------------------------------ checks
     def _vector(self, value: Any, n: int, name: str) -> np.ndarray:

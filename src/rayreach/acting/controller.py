@@ -5,7 +5,7 @@ own loop all act the same way. Each step reports ``info["acting"]``: the ``sourc
 chose the executed motion (``rayreach.acting.config.SOURCES``) and whether the arm was
 ``held`` (its joints did not move: every try refused, or a step of nothing), and what
 ``proposed`` the command before the shield reshaped it (``policy``, ``final_approach``,
-``detour`` or ``stall``).
+``detour`` or ``stall``), and on a held step what ``held_by`` it (``held_by``).
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ from rayreach.acting.config import ActingConfig
 from rayreach.acting.layers import acting_components
 from rayreach.acting.memory import RayMemory
 from rayreach.acting.mesh_capsules import ArmCapsules
-from rayreach.acting.pipeline import SHORTER, Episode, choose
+from rayreach.acting.pipeline import SHORTER, Episode, choose, held_by
 from rayreach.env.reach import ReachEnv
 from rayreach.robots.urdf import TOOL_LINK
 
@@ -91,5 +91,5 @@ class ActingEnv(gym.Wrapper):
         info["reward_terms"]["shielded"] = chosen.shaped
         held = not taken or np.array_equal(q_before, reach.q)
         info["acting"] = {"source": "held" if held else chosen.command.source, "proposed": chosen.proposed,
-                          "held": held}
+                          "held": held, "held_by": held_by(chosen) if held else ""}
         return obs, reward + chosen.shaped, terminated, truncated, info

@@ -107,6 +107,8 @@ class Chosen:
     """The IK solution of the step tried last."""
     taken: bool
     """Whether the arm may take ``ik``'s solution (else it holds still)."""
+    refused_by: str = ""
+    """The component whose veto held the arm (its ``name``); "" where the step was taken."""
 
 
 def choose(components: list[Component], episode: Episode, action: np.ndarray,
@@ -127,7 +129,7 @@ def choose(components: list[Component], episode: Episode, action: np.ndarray,
     source = command.source
     shaped = sum(component.reshape(command, now, episode) for component in components)
 
-    def attempt(delta: np.ndarray) -> tuple[IKResult, Verdict]:
+    def attempt(delta: np.ndarray) -> tuple[IKResult, Verdict, str]:
         ik = solve(delta, True)
         if not ik.converged and command.straight:
             # the final approach moves the tip and keeps the tool's orientation only where IK
@@ -137,12 +139,21 @@ def choose(components: list[Component], episode: Episode, action: np.ndarray,
         for component in components:
             verdict = component.veto(command, ik, pose, now, episode)
             if verdict is not Verdict.ALLOW:
-                return ik, verdict
-        return ik, Verdict.ALLOW
+                return ik, verdict, component.name
+        return ik, Verdict.ALLOW, ""
 
-    ik, verdict = attempt(command.delta)
+    ik, verdict, refused_by = attempt(command.delta)
     for share in SHORTER if verdict is Verdict.SHORTER else ():
-        ik, verdict = attempt(command.delta * share)
+        ik, verdict, refused_by = attempt(command.delta * share)
         if verdict is Verdict.ALLOW:
             break
-    return Chosen(command, source, shaped, ik, verdict is Verdict.ALLOW)
+    return Chosen(command, source, shaped, ik, verdict is Verdict.ALLOW, refused_by)
+
+
+def held_by(chosen: Chosen) -> str:
+    """What held the arm still on a step of ``chosen`` that did not move it: the component
+    that refused it (``"shield"``, ``"arm_guard"``), the shield where it cut the step to
+    nothing, else ``"still"`` (a step of nothing asked for, or IK left the joints as they were)."""
+    if chosen.refused_by:
+        return chosen.refused_by
+    return "shield" if not np.any(chosen.command.delta) and np.any(chosen.command.action) else "still"

@@ -36,6 +36,8 @@ class EpisodeRecord:
     sources: Counter = field(default_factory=Counter)
     """Steps by what chose the executed motion (``info["acting"]["source"]``; ``policy`` where
     nothing acted between the action and the arm)."""
+    held_by: Counter = field(default_factory=Counter)
+    """Held steps by what held the arm (``info["acting"]["held_by"]``)."""
 
     @property
     def steps(self) -> int:
@@ -74,7 +76,7 @@ def run_episode(env: gym.Env, act: Act, seed: int | None = None,
     base = env.unwrapped
     obs, info = env.reset(seed=seed) if start is None else start
     ee, joints = [info["ee_position"]], [base.q.copy()]
-    total, compute, sources = 0.0, 0.0, Counter()
+    total, compute, sources, held_by = 0.0, 0.0, Counter(), Counter()
     while True:
         if on_step is not None:
             on_step(obs, env)
@@ -87,7 +89,10 @@ def run_episode(env: gym.Env, act: Act, seed: int | None = None,
         total += reward
         ee.append(info["ee_position"])
         joints.append(base.q.copy())
-        sources[info.get("acting", {}).get("source", "policy")] += 1
+        acting = info.get("acting", {})
+        sources[acting.get("source", "policy")] += 1
+        if acting.get("held"):
+            held_by[acting.get("held_by", "")] += 1
         if terminated or truncated:
             break
-    return EpisodeRecord(info, np.asarray(ee), np.asarray(joints), total, compute, sources)
+    return EpisodeRecord(info, np.asarray(ee), np.asarray(joints), total, compute, sources, held_by)

@@ -40,6 +40,9 @@ class RolloutSummary:
     by_kind: dict[str, dict[str, int]] = field(default_factory=dict)
     """Random worlds: per obstacle kind (``random_world.KINDS``), the episodes whose world drew
     it and their outcomes; a world with two kinds counts for both."""
+    held_by: dict[str, float] = field(default_factory=dict)
+    """The share of all steps in which the arm was held, by what held it
+    (``rayreach.acting.pipeline.held_by``): where the layers cost a policy its time."""
     per_episode: list[dict] = field(default_factory=list)
 
     def to_dict(self, with_episodes: bool = False) -> dict:
@@ -80,12 +83,13 @@ def rollout(
     env = ActingEnv(base, acting)
     if random:
         base.set_n_obstacles(_trained_obstacles(policy) if n_obstacles is None else n_obstacles)
-    records, sources = [], Counter()
+    records, sources, held = [], Counter(), Counter()
     try:
         for episode in tqdm(range(episodes), desc=f"rollout {scenario}", disable=not progress, leave=False):
             agent.reset(first + episode)
             run = run_episode(env, agent.act, first + episode)
             sources.update(run.sources)
+            held.update(run.held_by)
             info = run.info
             records.append({"success": bool(info["is_success"]), "collision": bool(info["collision"]),
                             "out_of_bounds": bool(info["out_of_bounds"]), "outcome": run.outcome,
@@ -94,7 +98,10 @@ def rollout(
                             "kinds": world_kinds(base.scenario) if random else []})
     finally:
         env.close()
-    return _summary(records, deterministic, acting, sources, split, random)
+    summary = _summary(records, deterministic, acting, sources, split, random)
+    steps = sum(sources.values())
+    summary.held_by = {k: n / steps for k, n in sorted(held.items())} if steps else {}
+    return summary
 
 
 def _first_seed(split: str, seed: int | None, episodes: int, drawn: bool = True) -> int:
