@@ -22,7 +22,7 @@ from typing import Any
 
 from stable_baselines3.common.callbacks import BaseCallback
 
-from rayreach.learning.train import RECIPES, TrainConfig, train
+from rayreach.learning.train import TrainConfig, recipe, train
 
 BENCH_RECIPES = ("baseline", "default")
 """Timed in this order: the baseline first, so that the default gains nothing from a warm cache."""
@@ -86,7 +86,7 @@ def bench_train(robot: str, seconds: float, configs: dict[str, TrainConfig] | No
     "default" over "baseline". ``configs`` (named as ``BENCH_RECIPES``) replaces the two
     recipes for ``robot``, e.g. with smaller ones."""
     if configs is None:
-        configs = {name: replace(RECIPES[name], robot=robot) for name in BENCH_RECIPES}
+        configs = {name: recipe(name, robot=robot) for name in BENCH_RECIPES}
     phases = {name: time_recipe(config, seconds) for name, config in configs.items()}
     rates = {name: p["samples_per_s"] for name, p in phases.items()}
     return {"robot": robot, "seconds": seconds, "samples_per_s": rates,

@@ -98,10 +98,7 @@ def rollout(
                             "kinds": world_kinds(base.scenario) if random else []})
     finally:
         env.close()
-    summary = _summary(records, deterministic, acting, sources, split, random)
-    steps = sum(sources.values())
-    summary.held_by = {k: n / steps for k, n in sorted(held.items())} if steps else {}
-    return summary
+    return _summary(records, deterministic, acting, sources, split, random, held)
 
 
 def _first_seed(split: str, seed: int | None, episodes: int, drawn: bool = True) -> int:
@@ -121,8 +118,9 @@ def _trained_obstacles(policy) -> int:
 
 
 def _summary(records: list[dict], deterministic: bool, acting: ActingConfig, sources: Counter, split: str,
-             random: bool) -> RolloutSummary:
+             random: bool, held: Counter | None = None) -> RolloutSummary:
     episodes = len(records)
+    steps = sum(sources.values())
     successes = sum(r["success"] for r in records)
     collisions = sum(r["collision"] for r in records)
     lengths = [r["path_length"] for r in records if r["success"]]
@@ -137,6 +135,7 @@ def _summary(records: list[dict], deterministic: bool, acting: ActingConfig, sou
         deterministic=deterministic,
         acting_layers=list(acting.layers),
         acting_share=share(sources),
+        held_by={k: n / steps for k, n in sorted((held or {}).items())} if steps else {},
         safety=asdict(acting.safety),
         split=split if random else None,
         outcomes=_count(records),
