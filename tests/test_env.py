@@ -278,6 +278,7 @@ def test_collision_ends_the_episode(exp1_env):
     assert 20 <= k + 1 <= 30
     env = exp1_env.unwrapped
     assert env.scene.colliding_obstacles() == [0]
+    assert env.scene.colliding_links() == ["rayreach_tool"]  # the tool, not an arm link
     with pytest.raises(RuntimeError):
         exp1_env.step(np.zeros(6, dtype=np.float32))
 

@@ -248,6 +248,15 @@ class Scene:
                      for c in p.getClosestPoints(self.robot, body, within, physicsClientId=cid)]
         return min(distances, default=within)
 
+    def colliding_links(self) -> list[str]:
+        """Names of the robot's links (its URDF's, "base" for the base) that penetrate an
+        obstacle now: what a collision was made by, the arm or the tool."""
+        cid = self.client
+        p.performCollisionDetection(physicsClientId=cid)
+        links = {c[3] for c in p.getContactPoints(bodyA=self.robot, physicsClientId=cid) if c[8] < 0.0}
+        return sorted("base" if link < 0 else p.getJointInfo(self.robot, link, physicsClientId=cid)[12].decode()
+                      for link in links)
+
     def colliding_obstacles(self) -> list[int]:
         """Indices (into ``self.obstacles``) of the obstacles the robot penetrates now."""
         index = {body: i for i, body in enumerate(self._obstacle_ids)}
