@@ -8,7 +8,7 @@ import pytest
 
 from rayreach.evaluate.compare_recipes import GOAL, OBSTACLES, WallClock, fixed_task
 from rayreach.learning.curriculum import AugmentedGoalSize, ObstacleCurriculum
-from rayreach.learning.train import recipe
+from rayreach.learning.train import env_config, recipe
 
 
 @pytest.mark.parametrize("name", ["baseline", "default"])
@@ -32,7 +32,8 @@ def test_variants_change_one_thing_of_their_recipe():
 
     assert COMPARE_VARIANTS == tuple(VARIANTS)  # the CLI names them without importing torch
     default = recipe("default", robot="kr16")
-    for name in ("paper-observation", "no-scans", "no-workspace", "entropy", "around-obstacles", "proximity"):
+    for name in ("paper-observation", "no-scans", "no-workspace", "entropy", "around-obstacles", "proximity",
+                 "collision-20", "collision-40"):
         changed = [f.name for f in fields(default) if getattr(variant(name, "kr16"), f.name) != getattr(default, f.name)]
         assert len(changed) == 1, (name, changed)
     assert variant("no-scans", "ur5").observation.scans == 0 and variant("paper-observation", "ur5").observation.is_paper
@@ -40,6 +41,9 @@ def test_variants_change_one_thing_of_their_recipe():
     assert recipe("default", robot="ur5").observation.tip_back and not default.observation.tip_back
     for robot in ("ur5", "kr16"):
         assert variant("tip-back", robot).observation.tip_back and not variant("no-tip-back", robot).observation.tip_back
+    for name, weight in (("collision-20", -20.0), ("collision-40", -40.0)):  # the weight reaches the reward
+        assert env_config(variant(name, "ur5")).rewards.collision == weight
+    assert env_config(default).rewards.collision == -10.0  # the paper's r_c
     task = fixed_task(variant("entropy", "ur5"), goal=0.01, obstacles=2)
     assert (task.goal.rho, task.obstacles.start, task.ent_coef) == (0.01, 2, 0.005)
     with pytest.raises(ValueError, match="paper-observation"):

@@ -15,7 +15,7 @@ TRAIN_RECIPES = ("default", "baseline", "paper")
 """``rayreach.learning.train.RECIPES``' names (that module imports torch's stack)."""
 COMPARE_VARIANTS = ("baseline", "default", "paper", "paper-observation", "no-scans", "no-workspace", "entropy",
                     "around-obstacles", "proximity", "gamma-0.995", "gamma-0.998",
-                    "tip-back", "no-tip-back")
+                    "tip-back", "no-tip-back", "collision-20", "collision-40")
 """``rayreach.evaluate.compare_recipes.VARIANTS``' names."""
 ROBOT_HELP = " or ".join(ROBOTS)
 
@@ -158,6 +158,8 @@ def build_parser() -> argparse.ArgumentParser:
     train.add_argument("--resume", action="store_true", help="continue the checkpoint in --out")
     train.add_argument("--seed", type=int, default=0)
     train.add_argument("--checkpoint-every", type=int, default=100_000, help="steps between checkpoints")
+    train.add_argument("--collision-weight", type=float, default=None,
+                       help="reward of a collision (the paper's -10; also changes a resumed run)")
     train.add_argument("--progress-weight", type=float, default=None,
                        help="weight of the progress reward term (0: the paper's reward alone; also changes a resumed run)")
     train.add_argument("--proximity-weight", type=float, default=None,
@@ -568,14 +570,10 @@ def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
     if args.separate_features:
         config = replace(config, share_features=False)
     overrides: dict = {}
-    if args.progress_weight is not None:
-        overrides["progress_weight"] = args.progress_weight
-    if args.proximity_weight is not None:
-        overrides["proximity_weight"] = args.proximity_weight
-    if args.shield_weight is not None:
-        overrides["shield_weight"] = args.shield_weight
-    if args.progress_around_obstacles is not None:
-        overrides["progress_around_obstacles"] = args.progress_around_obstacles
+    for name in ("collision_weight", "progress_weight", "proximity_weight", "shield_weight",
+                 "progress_around_obstacles"):
+        if getattr(args, name) is not None:
+            overrides[name] = getattr(args, name)
     if args.obstacles is not None:
         overrides["obstacles"] = ObstacleParams(start=args.obstacles, minimum=args.obstacles, maximum=args.obstacles)
     if args.goal_size is not None:

@@ -48,6 +48,8 @@ VARIANTS: dict[str, tuple[str, dict[str, Any]]] = {
     "gamma-0.998": ("default", {"gamma": 0.998}),
     "tip-back": ("default", {"observation": replace(ObservationConfig.planner(), tip_back=True)}),
     "no-tip-back": ("default", {"observation": replace(ObservationConfig.planner(), tip_back=False)}),
+    "collision-20": ("default", {"collision_weight": -20.0}),
+    "collision-40": ("default", {"collision_weight": -40.0}),
 }
 """What can be compared: a recipe, or a recipe with one change (its ablation)."""
 

@@ -112,6 +112,8 @@ class TrainConfig:
     """Actor and critic share the feature extractor (the paper); False gives each its own."""
     normalize: bool = True
     """Running normalisation of observations and rewards (VecNormalize); not in the paper."""
+    collision_weight: float = -10.0
+    """r_c, the reward of a collision (the paper's -10, the same as leaving the workspace)."""
     progress_weight: float = 10.0
     """Weight of the progress term d_{t-1} - d_t; 0 is the paper's reward alone."""
     progress_around_obstacles: bool = False
@@ -221,7 +223,8 @@ def env_config(config: TrainConfig):
         true_goal_share=config.true_goal_share,
         true_goal_tolerance=config.goal.rho_min,
         max_steps=config.max_episode_steps,
-        rewards=replace(RewardWeights(), progress=config.progress_weight, proximity=config.proximity_weight,
+        rewards=replace(RewardWeights(), collision=config.collision_weight, progress=config.progress_weight,
+                        proximity=config.proximity_weight,
                         shielded=config.shield_weight, progress_around_obstacles=config.progress_around_obstacles),
         random_world=RandomWorldConfig(n_obstacles=config.obstacles.start),
         observation=config.observation,
