@@ -179,6 +179,24 @@ def test_batched_rollout_plays_the_worlds_rollout_plays():
         rollout_batched(MODELS_DIR / "ur10.zip", episodes=2, seed=8_999_999, split="test")
 
 
+def test_rollout_of_broad_worlds_counts_their_kinds_and_keeps_to_the_split():
+    """Broad worlds are drawn worlds like random ones: seeds from the split, outcomes by the
+    kinds ``broad_kinds`` reads, and the batched rollout plays the same worlds."""
+    from rayreach.evaluate.rollout import rollout, rollout_batched
+    from rayreach.scenarios.broad_world import BROAD_KINDS
+
+    one = rollout(MODELS_DIR / "ur5.zip", "broad", episodes=2, acting=ActingConfig.off(), progress=False)
+    batched = rollout_batched(MODELS_DIR / "ur5.zip", episodes=2, suite="broad")
+    assert one.split == "validation" and [r["seed"] for r in one.per_episode] == [1_000_000, 1_000_001]
+    assert set(one.by_kind) <= set(BROAD_KINDS) and one.by_kind
+    assert all(counts["episodes"] == sum(kind in r["kinds"] for r in one.per_episode)
+               for kind, counts in one.by_kind.items())
+    assert [(r["outcome"], r["steps"], r["kinds"]) for r in one.per_episode] == \
+        [(r["outcome"], r["steps"], r["kinds"]) for r in batched.per_episode]
+    with pytest.raises(ValueError, match="leave the test split"):
+        rollout(MODELS_DIR / "ur5.zip", "broad", episodes=2, seed=8_999_999, split="test", progress=False)
+
+
 def test_rollout_refuses_seeds_outside_its_split():
     from rayreach.evaluate.rollout import rollout
 

@@ -157,6 +157,8 @@ def test_exported_command_keeps_the_flags_a_resume_keeps():
     assert train_command({**base, "recipe": "paper"}, "RUN").startswith("rayreach train --recipe paper --robot kr16")
     fixed = {**base, "acting_layers": True, "obstacles": {"start": 1, "minimum": 1, "maximum": 1}}
     assert train_command(fixed, "RUN").endswith("--checkpoint-every 250000 --acting-layers --obstacles 1 [--resume]")
+    assert train_command({**base, "recipe": "default", "suite": "broad"}, "RUN").endswith(
+        "--checkpoint-every 250000 --suite broad [--resume]")
 
 
 # ---------------------------------------------------------------------- recipes and the batched path
@@ -185,6 +187,8 @@ def test_recipes_round_trip_through_bundle_meta_and_old_metas_read_as_baseline()
         TrainConfig(vec_env="subproc")
     with pytest.raises(ValueError, match="constant, adaptive"):
         TrainConfig(lr_schedule="linear")
+    with pytest.raises(ValueError, match="suite must be one of random, broad; got 'kitchen'"):
+        TrainConfig(suite="kitchen")
 
 
 def test_paper_recipe_is_the_papers_agent():
@@ -321,6 +325,27 @@ def test_default_recipe_trains_and_resumes_on_the_batched_path(tmp_path, monkeyp
         assert load_policy(out / "model.zip").observation == TrainConfig().observation
         summary = rollout(out / "model.zip", "random", episodes=1, progress=False)
         assert summary.episodes == 1
+
+
+@pytest.mark.skipif(not _HAS_BATCHED, reason="no rayreach.env.batched yet")
+def test_a_policy_trained_in_broad_worlds_plays_them_and_is_refused_only_beyond_the_reach(tmp_path):
+    """``suite="broad"`` trains in broad worlds; the policy knows it, and the DRL planner
+    takes a goal in the arm's reach that lies outside the training box of random worlds."""
+    from rayreach.evaluate.rollout import rollout
+    from rayreach.learning.train import train
+    from rayreach.planners import make_planner
+
+    out = tmp_path / "broad"
+    train(_small_default(timesteps=256, suite="broad"), out)
+    meta, _ = read_bundle_meta(out / "model.zip")
+    assert meta["config"]["suite"] == "broad" and load_policy(out / "model.zip").suite == "broad"
+    assert load_policy(out / "model.zip").observation == TrainConfig().observation
+    assert rollout(out / "model.zip", "broad", episodes=1, progress=False).by_kind  # broad kinds, read back
+    start, beside = np.array([0.0, 0.5, 0.35]), np.array([[0.7, 0.0, 0.6]])  # out of the UR5's box, in its reach
+    assert make_planner("drl", "ur5").refusal(start, beside).startswith("outside training")
+    broad = make_planner("drl", "ur5", model=out / "model.zip")
+    assert broad.refusal(start, beside) is None
+    assert "outside the training workspace" in broad.refusal(start, np.array([[2.0, 0.0, 0.6]]))
 
 
 def test_bench_train_times_both_recipes(tmp_path, monkeypatch):

@@ -158,6 +158,9 @@ def build_parser() -> argparse.ArgumentParser:
     train.add_argument("--resume", action="store_true", help="continue the checkpoint in --out")
     train.add_argument("--seed", type=int, default=0)
     train.add_argument("--checkpoint-every", type=int, default=100_000, help="steps between checkpoints")
+    train.add_argument("--suite", choices=["random", "broad"], default=None,
+                       help="the drawn worlds to train in: random (the training box, default) or broad "
+                            "(tables, shelves, boxes, clutter, walls up to the arm's reach)")
     train.add_argument("--collision-weight", type=float, default=None,
                        help="reward of a collision (the paper's -10; also changes a resumed run)")
     train.add_argument("--progress-weight", type=float, default=None,
@@ -569,6 +572,8 @@ def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
         config = replace(config, target_kl=args.target_kl or None)
     if args.separate_features:
         config = replace(config, share_features=False)
+    if args.suite is not None:
+        config = replace(config, suite=args.suite)
     overrides: dict = {}
     for name in ("collision_weight", "progress_weight", "proximity_weight", "shield_weight",
                  "progress_around_obstacles"):

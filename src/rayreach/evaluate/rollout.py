@@ -13,9 +13,10 @@ from rayreach.acting import ActingConfig, ActingEnv, ActingPolicy
 from rayreach.env.reach import OUTCOMES, ReachEnv
 from rayreach.env.episode import run_episode, share
 from rayreach.learning.policy import load_policy
-from rayreach.scenarios import RANDOM
+from rayreach.scenarios import RANDOM, WORLD_SUITES
 from rayreach.scenarios.splits import get_split
-from rayreach.scenarios.random_world import RandomWorldConfig, world_kinds
+from rayreach.scenarios.random_world import RandomWorldConfig
+from rayreach.scenarios.suites import suite_kinds
 
 @dataclass
 class RolloutSummary:
@@ -34,7 +35,7 @@ class RolloutSummary:
     """The share of all steps by what chose the executed motion (``info["acting"]["source"]``)."""
     safety: dict[str, float]
     split: str | None = None
-    """Random worlds: the seed split they were drawn from."""
+    """Drawn worlds (random, broad): the seed split they were drawn from."""
     outcomes: dict[str, int] = field(default_factory=dict)
     """Episodes per outcome: success, collision, out_of_bounds, timeout."""
     by_kind: dict[str, dict[str, int]] = field(default_factory=dict)
@@ -70,18 +71,18 @@ def rollout(
     split: str = "validation",
 ) -> RolloutSummary:
     """``episodes`` episodes of the policy at ``goal_tolerance``, acting through ``acting``
-    (``ActingConfig.off()``: the policy alone). Random worlds come from seed ``split`` (from
+    (``ActingConfig.off()``: the policy alone). Drawn worlds (``WORLD_SUITES``) come from seed ``split`` (from
     ``seed`` on, which must lie in it; default: the split's first), use the final obstacle
     count of training unless ``n_obstacles`` is given, and keep the robot's start
     ``start_clearance`` from every obstacle (``RandomWorldConfig.start_clearance``)."""
-    random = scenario == RANDOM
-    first = _first_seed(split, seed, episodes, drawn=random)
+    drawn = scenario in WORLD_SUITES
+    first = _first_seed(split, seed, episodes, drawn=drawn)
     policy = load_policy(model)
     agent = ActingPolicy(policy, deterministic=deterministic, resample=acting.resample)
     base = ReachEnv(robot=policy.robot, scenario=scenario, goal_tolerance=goal_tolerance,
                     random_world=RandomWorldConfig(start_clearance=start_clearance), observation=policy.observation)
     env = ActingEnv(base, acting)
-    if random:
+    if drawn:
         base.set_n_obstacles(_trained_obstacles(policy) if n_obstacles is None else n_obstacles)
     records, sources, held = [], Counter(), Counter()
     try:
@@ -95,10 +96,10 @@ def rollout(
                             "out_of_bounds": bool(info["out_of_bounds"]), "outcome": run.outcome,
                             "steps": run.steps, "path_length": run.path_length, "seed": first + episode,
                             "acting_share": run.acting_share,
-                            "kinds": world_kinds(base.scenario) if random else []})
+                            "kinds": suite_kinds(scenario, base.scenario) if drawn else []})
     finally:
         env.close()
-    return _summary(records, deterministic, acting, sources, split, random, held)
+    return _summary(records, deterministic, acting, sources, split, drawn, held)
 
 
 def _first_seed(split: str, seed: int | None, episodes: int, drawn: bool = True) -> int:
@@ -118,7 +119,7 @@ def _trained_obstacles(policy) -> int:
 
 
 def _summary(records: list[dict], deterministic: bool, acting: ActingConfig, sources: Counter, split: str,
-             random: bool, held: Counter | None = None) -> RolloutSummary:
+             drawn: bool, held: Counter | None = None) -> RolloutSummary:
     episodes = len(records)
     steps = sum(sources.values())
     successes = sum(r["success"] for r in records)
@@ -137,7 +138,7 @@ def _summary(records: list[dict], deterministic: bool, acting: ActingConfig, sou
         acting_share=share(sources),
         held_by={k: n / steps for k, n in sorted((held or {}).items())} if steps else {},
         safety=asdict(acting.safety),
-        split=split if random else None,
+        split=split if drawn else None,
         outcomes=_count(records),
         by_kind={kind: {"episodes": sum(kind in r["kinds"] for r in records),
                         **_count([r for r in records if kind in r["kinds"]])}
@@ -172,7 +173,7 @@ def rollout_batched(
     records: list[dict | None] = [None] * episodes
     try:
         obs = env.reset()
-        kinds = [world_kinds(s) for s in env.scenarios]
+        kinds = [suite_kinds(suite, s) for s in env.scenarios]
         lengths = np.zeros(episodes)
         last = env.ee_pos.copy()
         while any(r is None for r in records):

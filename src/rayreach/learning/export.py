@@ -10,13 +10,15 @@ from rayreach.learning.bundles import CheckpointError, _json_default, read_bundl
 
 def train_command(config: dict, out: str | Path) -> str:
     """The ``rayreach train`` command line a run's saved configuration stands for, with the
-    flags that stay on through ``--resume`` (acting layers, a fixed obstacle count); flags
+    flags that stay on through ``--resume`` (the suite, acting layers, a fixed obstacle count); flags
     given to one part only (``--freeze-features``, ``--critic-warmup``) are not saved."""
     command = (f"rayreach train --robot {config['robot']} --timesteps {config['timesteps']} --envs {config['envs']} "
                f"--out {out} --checkpoint-every {config['checkpoint_every']}")
     name = config.get("recipe", "baseline")  # a run saved before recipes were named was the baseline
     if name != "default":
         command = command.replace(" --robot", f" --recipe {name} --robot", 1)
+    if config.get("suite", "random") != "random":
+        command += f" --suite {config['suite']}"
     if config.get("acting_layers"):
         command += " --acting-layers"
     obstacles = config.get("obstacles", {})

@@ -32,6 +32,11 @@ class Policy:
         saved = self.meta.get("config", {}).get("observation")
         return ObservationConfig(**saved) if saved else ObservationConfig()
 
+    @property
+    def suite(self) -> str:
+        """The drawn worlds it was trained in (``TrainConfig.suite``; "random" before the choice)."""
+        return str(self.meta.get("config", {}).get("suite", "random"))
+
     def act(self, obs: np.ndarray, deterministic: bool = True) -> np.ndarray:
         action, _ = self.model.predict(self._normalized(obs), deterministic=deterministic)
         return action

@@ -27,6 +27,7 @@ from rayreach.learning.curriculum import AugmentedGoalSize, GoalSizeParams, Obst
 from rayreach.learning.bundles import CheckpointError, read_bundle_meta, restore_normalization, save_bundle
 from rayreach.env.observation import ObservationConfig
 from rayreach.env.rewards import RewardWeights
+from rayreach.scenarios import WORLD_SUITES
 
 CHECKPOINT = "checkpoint.zip"
 MODEL = "model.zip"
@@ -61,6 +62,10 @@ class TrainConfig:
     recipe: str = "default"
     """The ``RECIPES`` entry the run started from (its ``--recipe``)."""
     robot: str = "ur5"
+    suite: str = "random"
+    """The drawn worlds it trains in (``rayreach.scenarios.WORLD_SUITES``): "random", the
+    paper's kind of scene in the robot's training box; "broad", a user's cell (tables,
+    shelves, boxes, clutter, walls) up to the arm's reach (docs/environment.md)."""
     timesteps: int = 40_000_000
     """Environment steps of the whole run: about 2 h of the default recipe on two cores."""
     envs: int = 256
@@ -149,6 +154,8 @@ class TrainConfig:
     device: str = "cpu"
 
     def __post_init__(self) -> None:
+        if self.suite not in WORLD_SUITES:
+            raise ValueError(f"suite must be one of {', '.join(WORLD_SUITES)}; got {self.suite!r}")
         if self.vec_env not in VEC_ENVS:
             raise ValueError(f"vec_env must be one of {', '.join(VEC_ENVS)}; got {self.vec_env!r}")
         if self.acting_layers and self.envs > ACTING_ENVS:
@@ -253,14 +260,14 @@ class ShieldedEpisodeTerm(gym.Wrapper):
 
 
 def make_env_fn(config: TrainConfig, rank: int):
-    """A thunk that builds one monitored random-world environment (picklable)."""
+    """A thunk that builds one monitored environment of the config's suite (picklable)."""
 
     def build():
         from stable_baselines3.common.monitor import Monitor
 
         from rayreach.env.reach import ReachEnv
 
-        env = ReachEnv(robot=config.robot, scenario="random", config=env_config(config))
+        env = ReachEnv(robot=config.robot, scenario=config.suite, config=env_config(config))
         if config.acting_layers:
             from rayreach.acting import ActingConfig, ActingEnv
 
@@ -278,7 +285,7 @@ def batched_vec_env(config: TrainConfig):
 
     from rayreach.env.batched import BatchedReachEnv
 
-    venv = BatchedReachEnv(config.robot, config.envs, scenario="random", config=env_config(config),
+    venv = BatchedReachEnv(config.robot, config.envs, scenario=config.suite, config=env_config(config),
                            seed=config.seed)
     return VecMonitor(venv, info_keywords=("is_success",))
 

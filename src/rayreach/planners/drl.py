@@ -70,7 +70,8 @@ class DRLPlanner(ReactivePlanner):
     The policy was trained only in its robot's training workspace, the box
     ``RobotSpec.workspace_low`` .. ``workspace_high`` (world frame, robot at its default base;
     UR5: x -0.4..0.4, y 0.3..0.7, z 0.2..0.5 m; KR16: x -0.8..0.8, y -0.4..0.8, z 0.4..1.8 m),
-    among the obstacle kinds of its training worlds. Outside that box its actions are
+    among the obstacle kinds of its training worlds; a policy trained in broad worlds
+    (``TrainConfig.suite``), in the box of the arm's reach. Outside that box its actions are
     guesses: it times out or wanders. So with ``refuse_unseen`` (the default) a query whose
     start or any goal lies more than ``unseen_margin`` outside the box is refused before the
     arm moves, recorded as ``outside training`` with a message naming the point and the box;
@@ -106,9 +107,10 @@ class DRLPlanner(ReactivePlanner):
         if not self.refuse_unseen:
             return None
         from rayreach.robots import get_robot
+        from rayreach.scenarios.suites import suite_workspace
 
         spec = get_robot(self.robot)
-        low, high = np.asarray(spec.workspace_low, dtype=float), np.asarray(spec.workspace_high, dtype=float)
+        low, high = suite_workspace(self.policy.suite, spec)
         points = [("start", np.asarray(start, dtype=float))]
         points += [(f"goal {i}", np.asarray(g, dtype=float)) for i, g in enumerate(goals)]
         for label, point in points:
@@ -116,7 +118,7 @@ class DRLPlanner(ReactivePlanner):
             if excess > self.unseen_margin:
                 return (f"outside training: the {label} at {np.round(point, 3).tolist()} lies {excess:.2f} m "
                         f"outside the training workspace of the {spec.name} policy, "
-                        f"{list(spec.workspace_low)} .. {list(spec.workspace_high)} m (margin "
+                        f"{np.round(low, 3).tolist()} .. {np.round(high, 3).tolist()} m (margin "
                         f"{self.unseen_margin} m); the policy was not trained there. A sampling planner "
                         "(rrt, birrt, ncrrt, ompl-rrtconnect) can plan this scene; "
                         "DRLPlanner(..., refuse_unseen=False) runs the policy anyway")

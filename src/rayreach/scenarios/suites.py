@@ -10,8 +10,9 @@ import numpy as np
 
 from rayreach.robots.spec import RobotSpec
 from rayreach.scenarios import BROAD, RANDOM, WORLD_SUITES
-from rayreach.scenarios.broad_world import BroadWorldConfig, BroadWorlds, broad_workspace
-from rayreach.scenarios.random_world import RandomWorldConfig, RandomWorlds, WorldChecker
+from rayreach.scenarios import Scenario
+from rayreach.scenarios.broad_world import BroadWorldConfig, BroadWorlds, broad_kinds, broad_workspace
+from rayreach.scenarios.random_world import RandomWorldConfig, RandomWorlds, WorldChecker, world_kinds
 from rayreach.sim.kinematics import Kinematics
 
 
@@ -37,3 +38,8 @@ def suite_workspace(suite: str, spec: RobotSpec) -> tuple[np.ndarray, np.ndarray
     if check_suite(suite) == BROAD:
         return broad_workspace(spec)
     return np.asarray(spec.workspace_low, dtype=float), np.asarray(spec.workspace_high, dtype=float)
+
+
+def suite_kinds(suite: str, scenario: Scenario) -> list[str]:
+    """The kinds of the elements a world of ``suite`` drew (``world_kinds``, ``broad_kinds``)."""
+    return broad_kinds(scenario) if check_suite(suite) == BROAD else world_kinds(scenario)
