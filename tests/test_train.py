@@ -187,7 +187,7 @@ def test_recipes_round_trip_through_bundle_meta_and_old_metas_read_as_baseline()
         TrainConfig(vec_env="subproc")
     with pytest.raises(ValueError, match="constant, adaptive"):
         TrainConfig(lr_schedule="linear")
-    with pytest.raises(ValueError, match="suite must be one of random, broad; got 'kitchen'"):
+    with pytest.raises(ValueError, match="unknown world suite 'kitchen'; valid: random, broad"):
         TrainConfig(suite="kitchen")
 
 

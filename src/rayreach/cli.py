@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Sequence
 
 from rayreach.robots import ROBOTS  # specs only: numpy, no simulator
+from rayreach.scenarios import WORLD_SUITES  # names only: the scene schema, no simulator
 
 EVAL_PLANNERS = "drl,rrt,ncrrt,ompl-rrt,ompl-rrtconnect"
 TRAIN_RECIPES = ("default", "baseline", "paper")
@@ -113,7 +114,7 @@ def build_parser() -> argparse.ArgumentParser:
                          "(one layer off), rrt, birrt, ncrrt, ompl-rrt, ompl-rrtconnect "
                          f"(default {EVAL_PLANNERS}; --suite random: drl,drl-alone)")
     ev.add_argument("--runs", type=int, default=30, help="runs per experiment and planner")
-    ev.add_argument("--suite", choices=["random", "broad"], default=None,
+    ev.add_argument("--suite", choices=WORLD_SUITES, default=None,
                     help="worlds drawn instead of --experiments, from --split's seeds (disjoint from training): "
                          "random, the training worlds; broad, tables, shelves, boxes, clutter and walls in the "
                          "arm's reach")
@@ -158,7 +159,7 @@ def build_parser() -> argparse.ArgumentParser:
     train.add_argument("--resume", action="store_true", help="continue the checkpoint in --out")
     train.add_argument("--seed", type=int, default=0)
     train.add_argument("--checkpoint-every", type=int, default=100_000, help="steps between checkpoints")
-    train.add_argument("--suite", choices=["random", "broad"], default=None,
+    train.add_argument("--suite", choices=WORLD_SUITES, default=None,
                        help="the drawn worlds to train in: random (the training box, default) or broad "
                             "(tables, shelves, boxes, clutter, walls up to the arm's reach)")
     train.add_argument("--collision-weight", type=float, default=None,
@@ -679,7 +680,6 @@ def acting_from_args(args: argparse.Namespace):
 
 def _rollout(args: argparse.Namespace, scenario: str) -> int:
     from rayreach.evaluate.rollout import rollout, rollout_batched
-    from rayreach.scenarios import WORLD_SUITES
 
     acting = acting_from_args(args)
     if args.batched:

@@ -18,7 +18,7 @@ from rayreach.evaluate.store import ResultsStore
 from rayreach.evaluate.executor import ExecutionConfig, Executor, RunRecord
 from rayreach.planners import PLANNER_NAMES, GlobalPlanner, ReactivePlanner, make_planner
 from rayreach.robots import get_robot
-from rayreach.scenarios import EXPERIMENTS, RANDOM, WORLD_SUITES
+from rayreach.scenarios import EXPERIMENTS, RANDOM, WORLD_SUITES, check_suite
 from rayreach.scenarios.splits import EVALUATION_SPLITS, get_split
 
 SUITE_PREFIXES = tuple(f"{suite}-" for suite in WORLD_SUITES)
@@ -57,8 +57,7 @@ def random_experiment(robot: str, obstacles: int | None = None, split: str = "te
     another's."""
     if split not in EVALUATION_SPLITS:
         raise ValueError(f"unknown evaluation split '{split}'; valid: {', '.join(EVALUATION_SPLITS)}")
-    if suite not in WORLD_SUITES:
-        raise ValueError(f"unknown world suite '{suite}'; valid: {', '.join(WORLD_SUITES)}")
+    check_suite(suite)
     return f"{suite}-{robot}" + ("" if obstacles is None else f":{obstacles}") + f"@{split}"
 
 

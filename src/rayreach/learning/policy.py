@@ -10,6 +10,7 @@ import numpy as np
 
 from rayreach.env.observation import ObservationConfig
 from rayreach.learning.bundles import CheckpointError, Normalization, read_bundle_meta
+from rayreach.scenarios import RANDOM
 
 
 @dataclass
@@ -35,7 +36,7 @@ class Policy:
     @property
     def suite(self) -> str:
         """The drawn worlds it was trained in (``TrainConfig.suite``; "random" before the choice)."""
-        return str(self.meta.get("config", {}).get("suite", "random"))
+        return str(self.meta.get("config", {}).get("suite", RANDOM))
 
     def act(self, obs: np.ndarray, deterministic: bool = True) -> np.ndarray:
         action, _ = self.model.predict(self._normalized(obs), deterministic=deterministic)

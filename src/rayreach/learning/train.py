@@ -27,7 +27,7 @@ from rayreach.learning.curriculum import AugmentedGoalSize, GoalSizeParams, Obst
 from rayreach.learning.bundles import CheckpointError, read_bundle_meta, restore_normalization, save_bundle
 from rayreach.env.observation import ObservationConfig
 from rayreach.env.rewards import RewardWeights
-from rayreach.scenarios import WORLD_SUITES
+from rayreach.scenarios import RANDOM, check_suite
 
 CHECKPOINT = "checkpoint.zip"
 MODEL = "model.zip"
@@ -62,7 +62,7 @@ class TrainConfig:
     recipe: str = "default"
     """The ``RECIPES`` entry the run started from (its ``--recipe``)."""
     robot: str = "ur5"
-    suite: str = "random"
+    suite: str = RANDOM
     """The drawn worlds it trains in (``rayreach.scenarios.WORLD_SUITES``): "random", the
     paper's kind of scene in the robot's training box; "broad", a user's cell (tables,
     shelves, boxes, clutter, walls) up to the arm's reach (docs/environment.md)."""
@@ -154,8 +154,7 @@ class TrainConfig:
     device: str = "cpu"
 
     def __post_init__(self) -> None:
-        if self.suite not in WORLD_SUITES:
-            raise ValueError(f"suite must be one of {', '.join(WORLD_SUITES)}; got {self.suite!r}")
+        check_suite(self.suite)
         if self.vec_env not in VEC_ENVS:
             raise ValueError(f"vec_env must be one of {', '.join(VEC_ENVS)}; got {self.vec_env!r}")
         if self.acting_layers and self.envs > ACTING_ENVS:

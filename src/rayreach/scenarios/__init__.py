@@ -15,6 +15,13 @@ WORLD_SUITES = (RANDOM, BROAD)
 training worlds, and broad worlds of tables, shelves, boxes, clutter and walls in the arm's reach."""
 
 
+def check_suite(suite: str) -> str:
+    """``suite`` where it is one of ``WORLD_SUITES``; else an error that names them."""
+    if suite not in WORLD_SUITES:
+        raise ValueError(f"unknown world suite '{suite}'; valid: {', '.join(WORLD_SUITES)}")
+    return suite
+
+
 def builtin_path(name: str) -> Path:
     return Path(str(resources.files("rayreach.scenarios") / "data" / f"{name}.json"))
 
@@ -34,5 +41,5 @@ def get_scenario(name: str | Path | Scenario) -> Scenario:
     )
 
 
-__all__ = ["BROAD", "EXPERIMENTS", "RANDOM", "WORLD_SUITES", "ObstacleSpec", "Scenario", "ScenarioError", "StartSpec",
+__all__ = ["BROAD", "EXPERIMENTS", "RANDOM", "WORLD_SUITES", "check_suite", "ObstacleSpec", "Scenario", "ScenarioError", "StartSpec",
            "get_scenario"]

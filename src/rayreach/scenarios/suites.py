@@ -9,17 +9,10 @@ from __future__ import annotations
 import numpy as np
 
 from rayreach.robots.spec import RobotSpec
-from rayreach.scenarios import BROAD, RANDOM, WORLD_SUITES
-from rayreach.scenarios import Scenario
+from rayreach.scenarios import BROAD, RANDOM, Scenario, check_suite
 from rayreach.scenarios.broad_world import BroadWorldConfig, BroadWorlds, broad_kinds, broad_workspace
 from rayreach.scenarios.random_world import RandomWorldConfig, RandomWorlds, WorldChecker, world_kinds
 from rayreach.sim.kinematics import Kinematics
-
-
-def check_suite(suite: str) -> str:
-    if suite not in WORLD_SUITES:
-        raise ValueError(f"unknown world suite '{suite}'; valid: {', '.join(WORLD_SUITES)}")
-    return suite
 
 
 def world_sampler(suite: str, kin: Kinematics, checker: WorldChecker,
