@@ -37,7 +37,7 @@ def rays_before_collisions(model: str, kind: str, episodes: int, window: int) ->
     policy = load_policy(resolve_model(model))
     env = ReachEnv(robot=policy.robot, scenario="random", goal_tolerance=0.01,
                    random_world=RandomWorldConfig(n_obstacles=1, kinds=(kind,)), observation=policy.observation)
-    tip_back = RayModel.tip_back(env.spec_robot, env.config.ray_range)
+    tip_back = RayModel.extra(env.spec_robot, env.config.ray_range, tip_back=True)
     found = []
     try:
         for k in range(episodes):

@@ -192,9 +192,9 @@ def test_a_policy_with_tip_back_rays_reads_them_after_the_129(tmp_path):
         controller.reset(reach.q, reach.goals[0], reach.scenario.workspace_low, reach.scenario.workspace_high)
         with pytest.raises(ValueError, match=re.escape("readings must hold the 129 rays, then the 24 tip-back rays")):
             controller.step(reach.q.copy(), reach._ray_fractions.copy())
-        assert (reach._tip_back_fractions < 1).sum() >= 4  # the plate is in their sight
+        assert (reach._extra_fractions < 1).sum() >= 4  # the plate is in their sight
         for _ in range(40):
-            step = controller.step(reach.q.copy(), np.r_[reach._ray_fractions, reach._tip_back_fractions])
+            step = controller.step(reach.q.copy(), np.r_[reach._ray_fractions, reach._extra_fractions])
             np.testing.assert_allclose(controller.observer.obs[0], obs, atol=1e-6)
             obs, _, terminated, truncated, info = env.step(actor.act(obs, info))
             np.testing.assert_allclose(step.q_target, reach.q, atol=1e-12)

@@ -203,12 +203,16 @@ def test_progress_round_the_obstacles_steps_as_reach_env_does(robot, scenario):
     assert sum(outcomes.values()) >= 20
 
 
-def test_tip_back_rays_step_as_reach_env_does():
-    """Goal-cover worlds, where the tip-back rays see the plate over the goal."""
+@pytest.mark.parametrize("slanted", [False, True])
+def test_rays_beyond_the_129_step_as_reach_env_does(slanted):
+    """Goal-cover and plate worlds, where the tip-back rays see the plate over the goal and
+    the slanted ones plates across the tool."""
+    from dataclasses import replace
+
     from rayreach.env.observation import ObservationConfig
     from rayreach.scenarios.random_world import RandomWorldConfig
 
-    observation = ObservationConfig.planner()
+    observation = replace(ObservationConfig.planner(), slanted=slanted)
     outcomes = _compare("ur5", "random", 6, 12, max_steps=100, goal_tolerance=0.1, observation=observation,
                         random_world=RandomWorldConfig(n_obstacles=1, kinds=("goal_cover", "plate")))
     assert sum(outcomes.values()) >= 12

@@ -33,7 +33,7 @@ def test_variants_change_one_thing_of_their_recipe():
     assert COMPARE_VARIANTS == tuple(VARIANTS)  # the CLI names them without importing torch
     default = recipe("default", robot="kr16")
     for name in ("paper-observation", "no-scans", "no-workspace", "entropy", "around-obstacles", "proximity",
-                 "collision-20", "collision-40"):
+                 "collision-20", "collision-40", "separate-features", "wide"):
         changed = [f.name for f in fields(default) if getattr(variant(name, "kr16"), f.name) != getattr(default, f.name)]
         assert len(changed) == 1, (name, changed)
     assert variant("no-scans", "ur5").observation.scans == 0 and variant("paper-observation", "ur5").observation.is_paper
@@ -44,6 +44,7 @@ def test_variants_change_one_thing_of_their_recipe():
     for name, weight in (("collision-20", -20.0), ("collision-40", -40.0)):  # the weight reaches the reward
         assert env_config(variant(name, "ur5")).rewards.collision == weight
     assert env_config(default).rewards.collision == -10.0  # the paper's r_c
+    assert not variant("separate-features", "ur5").share_features and variant("wide", "ur5").features == (512, 512)
     task = fixed_task(variant("entropy", "ur5"), goal=0.01, obstacles=2)
     assert (task.goal.rho, task.obstacles.start, task.ent_coef) == (0.01, 2, 0.005)
     with pytest.raises(ValueError, match="paper-observation"):

@@ -53,7 +53,7 @@ def test_planner_parts_hold_the_goal_the_walls_the_motion_and_past_scans():
                 np.testing.assert_allclose(obs[k:k + N_RAYS], rays[then], atol=1e-6, err_msg=f"t={t} scan {back}")
                 np.testing.assert_allclose(obs[k + N_RAYS:k + N_RAYS + 3], ees[then] - env.ee_pos, atol=1e-6)
                 k += N_RAYS + 3
-            np.testing.assert_array_equal(obs[k:], env._tip_back_fractions.astype(np.float32))
+            np.testing.assert_array_equal(obs[k:], env._extra_fractions.astype(np.float32))
         assert np.ptp(np.array(rays), axis=0).max() > 0.05, "the scans should differ for the test to tell them apart"
         obs, _ = env.reset(seed=6)  # a new episode remembers nothing of the last
         k = OBS_SIZE + 15
@@ -115,5 +115,48 @@ def test_tip_back_rays_see_a_plate_over_the_tip_as_pybullet_casts_them():
         np.testing.assert_allclose(seen[[0, 12]], [underside / math.cos(math.radians(70)) / 0.4,
                                                    underside * math.sqrt(2) / 0.4], atol=1e-4)
         assert (seen < 1).sum() >= 4 and seen[6] == 1.0 and seen[18] == 1.0  # and nothing on the far side
+    finally:
+        env.close()
+
+
+def test_slanted_rays_see_a_thin_plate_across_the_tool_that_the_wraparound_misses():
+    """A 4 mm plate square to the tool's axis, beside it halfway up, lies between two rows of
+    the wraparound's radial rays; the slanted part, against PyBullet's ``rayTestBatch`` along
+    rays built here from the tool's pose, meets it from above and below."""
+    import math
+
+    import pybullet as p
+
+    from rayreach.robots import get_robot
+    from rayreach.sim.scene import OBSTACLE_GROUP
+    from rayreach.sim.sensors import N_SLANTED, SENSOR_SLICES, SLANTED_HEIGHTS, SLANTED_TILT
+
+    tool = get_robot("ur5").tool
+    config = ObservationConfig.planner()
+    slanted = ObservationConfig(**{**config.__dict__, "slanted": True})
+    env = ReachEnv(scenario=plate_over_the_tip(back=tool.length / 2, centre_out=0.1, half=0.07), observation=slanted)
+    try:
+        obs, _ = env.reset(seed=0)
+        assert obs.shape == env.observation_space.shape == (OBS_SIZE + config.extra_size(N_RAYS) + N_SLANTED,)
+        rays = obs[OBS_SIZE - N_RAYS:OBS_SIZE]
+        assert np.all(rays[SENSOR_SLICES["wraparound"]] == 1.0)  # edge-on between two rows
+        seen = obs[-N_SLANTED:]
+        tilt = math.radians(SLANTED_TILT)
+        local_o, local_d = [], []
+        for share in SLANTED_HEIGHTS:
+            for az in range(0, 360, 45):
+                radial = np.array([math.cos(math.radians(az)), math.sin(math.radians(az)), 0.0])
+                for sign in (-1, 1):
+                    local_o.append(radial * tool.radius + [0.0, 0.0, share * tool.length - tool.length])
+                    local_d.append(math.cos(tilt) * radial + [0.0, 0.0, sign * math.sin(tilt)])
+        origins = env.ee_pos + np.array(local_o) @ env.ee_rot.T  # from the tip back to the rays' heights
+        ends = origins + env.config.ray_range * (np.array(local_d) @ env.ee_rot.T)
+        hits = p.rayTestBatch(origins.tolist(), ends.tolist(), collisionFilterMask=OBSTACLE_GROUP,
+                              physicsClientId=env.scene.client)
+        np.testing.assert_allclose(seen, [1.0 if h[0] < 0 else h[2] for h in hits], atol=1e-5)
+        # azimuth 0 points at the plate: from a quarter up towards the tip, from three quarters back
+        gap = tool.length / 4 - 0.002
+        np.testing.assert_allclose(seen[[1, 16]], gap * math.sqrt(2) / 0.4, atol=1e-4)
+        assert seen[8] == seen[9] == 1.0  # azimuth 180 looks away from it
     finally:
         env.close()

@@ -466,3 +466,29 @@ def test_layout_rows_with_tip_back_list_its_rays_after_the_129():
         np.testing.assert_allclose(r["origin_flange"], [0.0, 0.0, spec.tool.length], atol=1e-6)
     z = np.array([r["direction_flange"][2] for r in back])
     np.testing.assert_allclose(z, np.repeat(np.cos(np.radians([110.0, 135.0])), 12), atol=1e-6)
+
+
+def test_layout_rows_list_the_slanted_rays_after_the_tip_back_ones():
+    """``rayreach rays --tip-back --slanted``: the 32 slanted rays follow the 24 tip-back ones;
+    each starts on the tool's surface at a quarter or three quarters of its length and leaves
+    it 45 degrees off square, towards the flange and the tip in turn."""
+    from rayreach.robots import get_robot
+    from rayreach.sim.sensors import N_SLANTED, N_TIP_BACK, layout_rows
+
+    spec = get_robot("kr16")
+    rows = layout_rows(spec, tip_back=True, slanted=True)
+    assert [r["index"] for r in rows] == list(range(N_RAYS + N_TIP_BACK + N_SLANTED))
+    assert rows[:N_RAYS + N_TIP_BACK] == layout_rows(spec, tip_back=True)
+    alone = layout_rows(spec, slanted=True)[N_RAYS:]
+    assert [r["index"] for r in alone] == list(range(N_RAYS, N_RAYS + N_SLANTED))
+    slanted = rows[N_RAYS + N_TIP_BACK:]
+    assert {r["sensor"] for r in slanted} == {"slanted"}
+    origins = np.array([r["origin"] for r in slanted])
+    directions = np.array([r["direction"] for r in slanted])
+    np.testing.assert_allclose(np.hypot(origins[:, 0], origins[:, 1]), spec.tool.radius, atol=1e-6)
+    np.testing.assert_allclose(origins[:, 2], np.repeat([0.25, 0.75], 16) * spec.tool.length, atol=1e-6)
+    np.testing.assert_allclose(np.linalg.norm(directions, axis=1), 1.0, atol=1e-6)
+    np.testing.assert_allclose(directions[:, 2], np.tile([-1.0, 1.0], 16) * np.sqrt(0.5), atol=1e-6)
+    # each leaves the surface outwards, along its origin's radial direction
+    outward = origins[:, :2] / spec.tool.radius
+    np.testing.assert_allclose(np.sum(outward * directions[:, :2], axis=1), np.sqrt(0.5), atol=1e-4)  # rounded rows

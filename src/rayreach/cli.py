@@ -16,7 +16,8 @@ TRAIN_RECIPES = ("default", "baseline", "paper")
 """``rayreach.learning.train.RECIPES``' names (that module imports torch's stack)."""
 COMPARE_VARIANTS = ("baseline", "default", "paper", "paper-observation", "no-scans", "no-workspace", "entropy",
                     "around-obstacles", "proximity", "gamma-0.995", "gamma-0.998",
-                    "tip-back", "no-tip-back", "collision-20", "collision-40")
+                    "tip-back", "no-tip-back", "collision-20", "collision-40", "separate-features", "wide",
+                    "slanted", "slanted-no-tip-back")
 """``rayreach.evaluate.compare_recipes.VARIANTS``' names."""
 ROBOT_HELP = " or ".join(ROBOTS)
 
@@ -307,6 +308,8 @@ def build_parser() -> argparse.ArgumentParser:
     rays.add_argument("--plot", type=Path, default=None, metavar="PNG", help="also draw the layout to this file")
     rays.add_argument("--tip-back", action="store_true",
                       help="also the 24 tip-back rays (129-152) that a policy of the default recipe reads")
+    rays.add_argument("--slanted", action="store_true",
+                      help="also the 32 slanted rays, after the tip-back ones where those are listed")
 
     demo = sub.add_parser("demo", help="a scripted episode on exp1, drawn to a PNG")
     demo.add_argument("--scenario", default="exp1")
@@ -772,7 +775,7 @@ def _rays(args: argparse.Namespace) -> int:
     from rayreach.sim.sensors import RAY_RANGE, layout_rows
 
     spec = get_robot(args.robot)
-    rows = layout_rows(spec, tip_back=args.tip_back)
+    rows = layout_rows(spec, tip_back=args.tip_back, slanted=args.slanted)
     if args.plot is not None:
         from rayreach.evaluate.ray_layout import ray_layout_figure
 

@@ -45,7 +45,7 @@ from rayreach.env.rewards import RewardWeights
 from rayreach.robots import RobotSpec, get_robot
 from rayreach.robots.urdf import TOOL_LINK
 from rayreach.sim.kinematics import STEP_IK, IKParams, IKResult, Kinematics
-from rayreach.sim.sensors import N_RAYS, N_TIP_BACK, RAY_RANGE, RayModel
+from rayreach.sim.sensors import N_RAYS, N_SLANTED, N_TIP_BACK, RAY_RANGE, RayModel
 
 UNITS = ("fraction", "m")
 """How ray readings may come: hit fractions of the range in [0, 1], or metres."""
@@ -116,9 +116,10 @@ class ArmController:
                                                                     RewardWeights(), capsules)
         self.actor = ActingPolicy(self.policy, deterministic=True, resample=acting.resample)
         self.observer = Observer(self.policy.observation, 1, N_RAYS, OBS_SIZE, self.spec.ee_step)
-        self.n_readings = N_RAYS + N_TIP_BACK * self.policy.observation.tip_back
-        """Ray readings a step takes: the paper's 129, then the 24 tip-back rays where the
-        policy observes them (``rayreach rays --tip-back``); the acting layers read the 129."""
+        self.n_readings = N_RAYS + self.policy.observation.extra_rays
+        """Ray readings a step takes: the paper's 129, then the rays the policy observes beyond
+        them, the 24 tip-back and the 32 slanted (``rayreach rays --tip-back --slanted``); the
+        acting layers read the 129."""
         self.step_scale = np.array([self.spec.ee_step] * 3 + [self.spec.rot_step] * 3)
         self.seed = seed
         self._goal: np.ndarray | None = None
@@ -147,14 +148,14 @@ class ArmController:
 
     def step(self, q: np.ndarray, readings: np.ndarray, unit: str = "fraction") -> ControlStep:
         """The next joint target from the measured joints ``q`` (rad) and the ``n_readings``
-        ray ``readings``: the 129, then the tip-back ones where the policy has them
+        ray ``readings``: the 129, then the tip-back and the slanted ones where the policy has them
         (``unit``: ``fraction`` of the range, 1 for nothing seen, or ``m``, where anything
         at or beyond the range reads as nothing seen)."""
         if self._goal is None:
             raise RuntimeError("call reset(q, goal) before step()")
         q = self._q_checked(q)
         fractions = self._fractions(readings, unit)
-        tip_back = fractions[None, N_RAYS:] if self.policy.observation.tip_back else None
+        extra = fractions[None, N_RAYS:] if self.n_readings > N_RAYS else None
         fractions = fractions[:N_RAYS]
         frames = self.kin.frames(q)
         ee = self.kin.ee_from_frames(frames)
@@ -166,7 +167,7 @@ class ArmController:
         distance = float(np.linalg.norm(self._goal - ee_pos))
         first = self._episode is None
         base = paper_observation(q, self._goal, ee_pos, ee_rot, self._ref_rot_t, distance, fractions)[None]
-        args = (ONE_WORLD, base, ee_pos[None], fractions[None], self._low[None], self._high[None], tip_back)
+        args = (ONE_WORLD, base, ee_pos[None], fractions[None], self._low[None], self._high[None], extra)
         if first:
             memory = RayMemory()
             memory.add(now, moved=True)
@@ -213,12 +214,18 @@ class ArmController:
             raise ValueError(f"joint angles outside the robot's limits: {names}")
         return q
 
+    def _extra_counts(self) -> list[tuple[str, int]]:
+        """The ray sets the policy reads after the 129, by name and count, in their order."""
+        c = self.policy.observation
+        return [(name, n) for name, n, on in (("tip-back", N_TIP_BACK, c.tip_back), ("slanted", N_SLANTED, c.slanted))
+                if on]
+
     def _fractions(self, readings: Any, unit: str) -> np.ndarray:
         if unit not in UNITS:
             raise ValueError(f"unknown unit '{unit}'; valid: {', '.join(UNITS)}")
         r = np.array(readings, dtype=float).reshape(-1)  # a copy, as in _vector
         if r.shape != (self.n_readings,):
-            what = f"{N_RAYS} rays" + (f", then the {N_TIP_BACK} tip-back rays" if self.n_readings > N_RAYS else "")
+            what = f"{N_RAYS} rays" + "".join(f", then the {n} {name} rays" for name, n in self._extra_counts())
             raise ValueError(f"readings must hold the {what} in the layout's order (docs/rays.md, rayreach rays), "
                              f"got {np.asarray(readings).shape}")
         if not np.all(np.isfinite(r)) or np.any(r < 0):

@@ -55,7 +55,7 @@ from rayreach.sim.batch_obstacles import ObstacleBatch
 from rayreach.sim.batch_rays import RayArrays, cast_worlds
 from rayreach.sim.kinematics import Kinematics
 from rayreach.sim.scene import Scene
-from rayreach.sim.sensors import N_RAYS, N_TIP_BACK, RayModel
+from rayreach.sim.sensors import N_RAYS, RayModel
 
 SHAKE_WINDOW = ShakeCounter().window
 """Movements the shaking counter compares."""
@@ -95,8 +95,8 @@ class BatchedReachEnv(VecEnv):
         base_rpy = fixed.base_rpy if fixed else None
         self.kin = Kinematics(spec, base_pos, base_rpy)
         self.layout = RayArrays.of(RayModel(spec, cfg.ray_range))
-        self.tip_back_layout = (RayArrays.of(RayModel.tip_back(spec, cfg.ray_range)) if cfg.observation.tip_back
-                                else None)
+        extra = RayModel.extra(spec, cfg.ray_range, cfg.observation.tip_back, cfg.observation.slanted)
+        self.extra_layout = RayArrays.of(extra) if extra is not None else None
         self.collision = CollisionWorlds(spec, n_worlds, base_pos, base_rpy)
         self.spheres = self.collision.spheres
         self.samplers = [world_sampler(str(scenario), self.kin, self.collision.slot(i), cfg.random_world)
@@ -136,7 +136,7 @@ class BatchedReachEnv(VecEnv):
         self.shake_queue = np.zeros((n, SHAKE_WINDOW + 1))
         self.shake_length = np.zeros(n, dtype=np.int64)
         self.fractions = np.ones((n, N_RAYS))
-        self.tip_back_fractions = np.ones((n, N_TIP_BACK))
+        self.extra_fractions = np.ones((n, cfg.observation.extra_rays))
         self.episode_terms = np.zeros((n, len(REWARD_TERM_NAMES)))
         self.converged = np.ones(n, dtype=bool)
         self.base_obs = np.zeros((n, OBS_SIZE), dtype=np.float32)
@@ -354,18 +354,17 @@ class BatchedReachEnv(VecEnv):
         return [s for s in self._scenarios if s is not None]
 
     def _cast(self, which: np.ndarray) -> None:
-        """Worlds ``which``'s ray fractions (and tip-back ones, where the observation has them)."""
+        """Worlds ``which``'s ray fractions (and those of the rays beyond the 129, where the observation has them)."""
         cfg = self.config
         cast_worlds(self.layout, self.frames, self.obstacles, cfg.ray_range, which, self.fractions)
-        if self.tip_back_layout is not None:
-            cast_worlds(self.tip_back_layout, self.frames, self.obstacles, cfg.ray_range, which,
-                        self.tip_back_fractions)
+        if self.extra_layout is not None:
+            cast_worlds(self.extra_layout, self.frames, self.obstacles, cfg.ray_range, which, self.extra_fractions)
 
     def _observer_args(self, which: np.ndarray) -> tuple:
         """Worlds ``which``'s rows of ``Observer.reset``'s and ``step``'s arguments after ``which``."""
-        tip_back = self.tip_back_fractions[which] if self.tip_back_layout is not None else None
+        extra = self.extra_fractions[which] if self.extra_layout is not None else None
         return (self.base_obs[which], self.ee_pos[which], self.fractions[which], self.ws_low[which],
-                self.ws_high[which], tip_back)
+                self.ws_high[which], extra)
 
     def _observe(self, which: np.ndarray, distance: np.ndarray) -> None:
         """The paper's 142 values of worlds ``which`` into ``base_obs``."""

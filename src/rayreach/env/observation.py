@@ -25,6 +25,8 @@ scans x (129 + 3)    each    a ray scan of ``scan_stride`` x (k + 1) steps ago (
                              where it is now, m (the episode's first scan until it has gone by)
 tip_back             24      fractions of the rays from the tool tip that look back towards
                              the arm (``rayreach.sim.sensors.tip_back_layout``), now
+slanted              32      fractions of the rays slanted along the tool
+                             (``rayreach.sim.sensors.slanted_layout``), now
 ===================  ======  =============================================================
 """
 
@@ -35,7 +37,7 @@ from dataclasses import dataclass
 import gymnasium as gym
 import numpy as np
 
-from rayreach.sim.sensors import N_RAYS, N_TIP_BACK
+from rayreach.sim.sensors import N_RAYS, N_SLANTED, N_TIP_BACK
 from rayreach.sim.transforms import matrix_to_rpy
 
 N_ROBOT_OBS = 13
@@ -82,6 +84,9 @@ class ObservationConfig:
     """Rays beside the paper's 129 that see what lies over the tool's tip (a plate over the
     goal); an env casts them only for a policy that has them. 9 points of validation
     success on UR5 worlds (docs/training.md, "The goal under a cover")."""
+    slanted: bool = False
+    """Rays beside the paper's 129, slanted along the tool, that meet a thin plate lying across
+    it (docs/training.md, "Slanted rays"); read after the tip-back rays."""
 
     def __post_init__(self) -> None:
         if self.scans < 0:
@@ -101,7 +106,12 @@ class ObservationConfig:
     def extra_size(self, n_rays: int) -> int:
         """Values appended after the paper's, for ``n_rays`` rays."""
         return (6 * self.goal_direction + 6 * self.workspace + 3 * self.motion + self.scans * (n_rays + 3)
-                + N_TIP_BACK * self.tip_back)
+                + self.extra_rays)
+
+    @property
+    def extra_rays(self) -> int:
+        """Rays read beyond the paper's 129 (``rayreach.sim.sensors.extra_layout``)."""
+        return N_TIP_BACK * self.tip_back + N_SLANTED * self.slanted
 
 
 class Observer:
@@ -141,35 +151,35 @@ class Observer:
         for _ in range(c.scans):
             low.append(np.concatenate((np.zeros(self.n_rays), np.full(3, -SCAN_OFFSET_RANGE))))
             high.append(np.concatenate((np.ones(self.n_rays), np.full(3, SCAN_OFFSET_RANGE))))
-        if c.tip_back:
-            low.append(np.zeros(N_TIP_BACK))
-            high.append(np.ones(N_TIP_BACK))
+        if c.extra_rays:
+            low.append(np.zeros(c.extra_rays))
+            high.append(np.ones(c.extra_rays))
         return gym.spaces.Box(np.concatenate(low).astype(np.float32), np.concatenate(high).astype(np.float32),
                               dtype=np.float32)
 
     def reset(self, which: np.ndarray, base: np.ndarray, ee: np.ndarray, rays: np.ndarray,
-              ws_low: np.ndarray, ws_high: np.ndarray, tip_back: np.ndarray | None = None) -> None:
+              ws_low: np.ndarray, ws_high: np.ndarray, extra: np.ndarray | None = None) -> None:
         """Worlds ``which`` start an episode: their memory holds only this moment.
-        ``tip_back``: their tip-back ray fractions, where the config has them."""
+        ``extra``: their fractions of the rays beyond the 129, where the config has them."""
         self.t[which] = 0
         self.last_ee[which] = ee
         if self.config.scans:
             self.scan_rays[which] = rays[:, None, :]
             self.scan_ee[which] = ee[:, None, :]
-        self._write(which, base, ee, rays, ws_low, ws_high, tip_back)
+        self._write(which, base, ee, rays, ws_low, ws_high, extra)
 
     def step(self, which: np.ndarray, base: np.ndarray, ee: np.ndarray, rays: np.ndarray,
-             ws_low: np.ndarray, ws_high: np.ndarray, tip_back: np.ndarray | None = None) -> None:
+             ws_low: np.ndarray, ws_high: np.ndarray, extra: np.ndarray | None = None) -> None:
         """Worlds ``which`` took a step; ``base`` is their paper observation after it."""
         self.t[which] += 1
         if self.config.scans:
             slot = self.t[which] % self.length
             self.scan_rays[which, slot] = rays
             self.scan_ee[which, slot] = ee
-        self._write(which, base, ee, rays, ws_low, ws_high, tip_back)
+        self._write(which, base, ee, rays, ws_low, ws_high, extra)
         self.last_ee[which] = ee
 
-    def _write(self, which, base, ee, rays, ws_low, ws_high, tip_back) -> None:
+    def _write(self, which, base, ee, rays, ws_low, ws_high, extra) -> None:
         c, out = self.config, self.obs
         out[which, : self.base_size] = base
         k = self.base_size
@@ -192,8 +202,8 @@ class Observer:
             out[which, k + self.n_rays: k + self.n_rays + 3] = np.clip(
                 self.scan_ee[which, slot] - ee, -SCAN_OFFSET_RANGE, SCAN_OFFSET_RANGE)
             k += self.n_rays + 3
-        if c.tip_back:
-            if tip_back is None:
-                raise ValueError("this observation holds the tip-back rays (ObservationConfig.tip_back); pass "
-                                 "their fractions")
-            out[which, k: k + N_TIP_BACK] = tip_back
+        if c.extra_rays:
+            if extra is None:
+                raise ValueError(f"this observation holds {c.extra_rays} rays beyond the 129 (ObservationConfig."
+                                 "tip_back, slanted); pass their fractions")
+            out[which, k: k + c.extra_rays] = extra

@@ -235,7 +235,7 @@ class ReachEnv(gym.Env):
         self.config = make_config(self.config, {"observation": observation})
         self.observer = Observer(observation, 1, N_RAYS, OBS_SIZE, self.spec_robot.ee_step)
         self.observation_space = self.observer.space(self._paper_space)
-        self._tip_back = RayModel.tip_back(self.spec_robot, self.config.ray_range) if observation.tip_back else None
+        self._extra = RayModel.extra(self.spec_robot, self.config.ray_range, observation.tip_back, observation.slanted)
         self._ready = False
 
     def set_n_obstacles(self, n: int) -> None:
@@ -401,9 +401,8 @@ class ReachEnv(gym.Env):
         self._ray_origins, self._ray_directions = self.rays.world_rays(self.frames)
         self._ray_fractions = self.caster.cast(self._ray_origins, self._ray_directions, self.config.ray_range)
         self._ray_lengths = self._ray_fractions * self.config.ray_range  # the range where nothing is seen
-        if self._tip_back is not None:
-            self._tip_back_fractions = self.caster.cast(*self._tip_back.world_rays(self.frames),
-                                                        self.config.ray_range)
+        if self._extra is not None:
+            self._extra_fractions = self.caster.cast(*self._extra.world_rays(self.frames), self.config.ray_range)
         return self._ray_fractions
 
     def perceive(self) -> Perception:
@@ -422,7 +421,7 @@ class ReachEnv(gym.Env):
         assert scenario is not None
         return (ONE_WORLD, self._observation(distance, rays)[None], self.ee_pos[None], rays[None],
                 np.asarray(scenario.workspace_low)[None], np.asarray(scenario.workspace_high)[None],
-                self._tip_back_fractions[None] if self._tip_back is not None else None)
+                self._extra_fractions[None] if self._extra is not None else None)
 
     def _observation(self, distance: float, rays: np.ndarray) -> np.ndarray:
         """The paper's 142 values."""

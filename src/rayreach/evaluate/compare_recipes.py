@@ -50,6 +50,11 @@ VARIANTS: dict[str, tuple[str, dict[str, Any]]] = {
     "no-tip-back": ("default", {"observation": replace(ObservationConfig.planner(), tip_back=False)}),
     "collision-20": ("default", {"collision_weight": -20.0}),
     "collision-40": ("default", {"collision_weight": -40.0}),
+    "separate-features": ("default", {"share_features": False}),
+    "wide": ("default", {"features": (512, 512)}),
+    "slanted": ("default", {"observation": replace(ObservationConfig.planner(), slanted=True)}),
+    "slanted-no-tip-back": ("default", {"observation": replace(ObservationConfig.planner(), tip_back=False,
+                                                               slanted=True)}),
 }
 """What can be compared: a recipe, or a recipe with one change (its ablation)."""
 

@@ -43,6 +43,12 @@ SENSOR_SLICES = {"wrist": slice(0, 24), "wraparound": slice(24, 104), "tip": sli
 TIP_BACK_POLAR = (110.0, 135.0)
 """Polar angles from the tool's axis, deg, of the two rings of ``tip_back_layout``."""
 N_TIP_BACK = 12 * len(TIP_BACK_POLAR)
+SLANTED_TILT = 45.0
+"""Tilt of the slanted rays from the wraparound's radial directions towards the flange and the
+tip, deg."""
+SLANTED_HEIGHTS = (0.25, 0.75)
+"""Where along the tool the slanted rays start, as shares of its length from the flange."""
+N_SLANTED = 8 * len(SLANTED_HEIGHTS) * 2
 
 
 @dataclass(frozen=True)
@@ -92,19 +98,47 @@ def tip_back_layout(spec: RobotSpec) -> list[RayGroup]:
     return [RayGroup("tool", np.tile([0.0, 0.0, spec.tool.length], (len(dirs), 1)), dirs)]
 
 
+def slanted_layout(spec: RobotSpec) -> list[RayGroup]:
+    """Rays beside the paper's 129, an option of the observation (``ObservationConfig.slanted``):
+    from the tool's surface at ``SLANTED_HEIGHTS``, 8 azimuths 45 deg apart as the wraparound's,
+    each tilted by ``SLANTED_TILT`` towards the flange and towards the tip. The wraparound's
+    radial rays are 13 mm apart along the UR5's tool, so a plate a few millimetres thick that
+    lies across the tool falls between them; a slanted ray meets it along its whole length.
+    Order: height, then azimuth, then the tilt towards the flange before the one towards the tip."""
+    length, radius = spec.tool.length, spec.tool.radius
+    tilt = math.radians(SLANTED_TILT)
+    origins, directions = [], []
+    for share in SLANTED_HEIGHTS:
+        for az in np.radians(np.arange(8) * 45.0):
+            radial = np.array([math.cos(az), math.sin(az), 0.0])
+            for sign in (-1.0, 1.0):
+                origins.append(radial * radius + [0.0, 0.0, share * length])
+                directions.append(math.cos(tilt) * radial + [0.0, 0.0, sign * math.sin(tilt)])
+    return [RayGroup("tool", np.array(origins), np.array(directions))]
+
+
+def extra_layout(spec: RobotSpec, tip_back: bool, slanted: bool) -> list[RayGroup]:
+    """The rays an observation reads after the paper's 129: the tip-back rays, then the slanted."""
+    return [*(tip_back_layout(spec) if tip_back else []), *(slanted_layout(spec) if slanted else [])]
+
+
 def mount_offset(mount: SensorMount) -> np.ndarray:
     return pose_matrix(mount.xyz, rpy_to_matrix(mount.rpy))
 
 
-def layout_rows(spec: RobotSpec, tip_back: bool = False) -> list[dict]:
+def layout_rows(spec: RobotSpec, tip_back: bool = False, slanted: bool = False) -> list[dict]:
     """Every ray in observation order, as a user mounts or emulates it: its sensor, the mount's
     link and chain frame, its origin and unit direction in the mount frame and in the flange
-    frame (chain frame n, the tool's axis along +z). ``tip_back``: then the tip-back rays
-    (indices from 129), which a policy with ``ObservationConfig.tip_back`` reads too."""
+    frame (chain frame n, the tool's axis along +z). ``tip_back``, ``slanted``: then those rays
+    (indices from 129, the tip-back first), which a policy observing them reads too."""
     rows = []
     groups = list(zip(ray_layout(spec), SENSOR_SLICES.items()))
-    if tip_back:
-        groups.append((tip_back_layout(spec)[0], ("tip-back", slice(N_RAYS, N_RAYS + N_TIP_BACK))))
+    start = N_RAYS
+    for name, wanted, layout in (("tip-back", tip_back, tip_back_layout), ("slanted", slanted, slanted_layout)):
+        if wanted:
+            group = layout(spec)[0]
+            groups.append((group, (name, slice(start, start + len(group.origins)))))
+            start += len(group.origins)
     for group, (sensor, block) in groups:
         mount = spec.mounts[group.mount]
         if mount.frame != spec.n_joints:
@@ -146,9 +180,11 @@ class RayModel:
             self._blocks.append((m.frame, mount_offset(m), block, all_o[block], all_d[block].T.copy()))
 
     @classmethod
-    def tip_back(cls, spec: RobotSpec, ray_range: float = RAY_RANGE) -> "RayModel":
-        """The tip-back rays (``tip_back_layout``) in place of the paper's."""
-        return cls(spec, ray_range, tip_back_layout(spec))
+    def extra(cls, spec: RobotSpec, ray_range: float = RAY_RANGE, tip_back: bool = False,
+              slanted: bool = False) -> "RayModel | None":
+        """The rays read after the paper's (``extra_layout``) in place of them; None where there are none."""
+        groups = extra_layout(spec, tip_back, slanted)
+        return cls(spec, ray_range, groups) if groups else None
 
     def world_rays(self, frames: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """World origins and unit directions, each (n_rays, 3), from the robot's chain frames."""
