@@ -13,7 +13,7 @@ import subprocess
 import sys
 import time
 import types
-from dataclasses import replace
+from dataclasses import asdict, replace
 from pathlib import Path
 
 import numpy as np
@@ -159,6 +159,12 @@ def test_exported_command_keeps_the_flags_a_resume_keeps():
     assert train_command(fixed, "RUN").endswith("--checkpoint-every 250000 --acting-layers --obstacles 1 [--resume]")
     assert train_command({**base, "recipe": "default", "suite": "broad"}, "RUN").endswith(
         "--checkpoint-every 250000 --suite broad [--resume]")
+    slanted = asdict(replace(recipe("default", robot="kr16").observation, slanted=True))
+    assert train_command({**base, "recipe": "default", "observation": slanted}, "RUN").endswith(
+        "--checkpoint-every 250000 --slanted [--resume]")
+    no_tip_back = asdict(replace(recipe("default", robot="ur5").observation, tip_back=False))
+    assert train_command({**base, "robot": "ur5", "recipe": "default", "observation": no_tip_back}, "RUN").endswith(
+        "--checkpoint-every 250000 --no-tip-back [--resume]")
 
 
 # ---------------------------------------------------------------------- recipes and the batched path
@@ -372,3 +378,16 @@ def test_bench_train_command_prints_its_record_last():
     record = json.loads(done.stdout.strip().splitlines()[-1])
     assert set(record) >= {"robot", "seconds", "samples_per_s", "speedup", "phases"}
     assert set(record["samples_per_s"]) == {"baseline", "default"} and record["seconds"] == 3
+
+
+def test_train_command_line_sets_the_rays_beyond_the_recipes(tmp_path):
+    """``--slanted`` and ``--no-tip-back`` change the observation a run trains with, and the
+    policy it saves reads them back."""
+    from rayreach.cli import main
+
+    out = tmp_path / "kr16-slanted"
+    assert main(["train", "--robot", "kr16", "--slanted", "--tip-back", "--timesteps", "256", "--envs", "4",
+                 "--workers", "1", "--out", str(out)]) == 0
+    observation = load_policy(out / "model.zip").observation
+    assert observation.slanted and observation.tip_back
+    assert observation == replace(recipe("default", robot="kr16").observation, slanted=True, tip_back=True)

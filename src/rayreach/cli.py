@@ -178,6 +178,12 @@ def build_parser() -> argparse.ArgumentParser:
     train.add_argument("--separate-features", action="store_true", help="actor and critic get their own extractor")
     train.add_argument("--obstacles", type=int, default=None,
                        help="fix the obstacle count (no obstacle curriculum; also holds a resumed run's count)")
+    train.add_argument("--tip-back", action=argparse.BooleanOptionalAction, default=None,
+                       help="read the 24 tip-back rays (default: the recipe's for the robot; a resumed run keeps "
+                            "its own observation)")
+    train.add_argument("--slanted", action=argparse.BooleanOptionalAction, default=None,
+                       help="read the 32 slanted rays along the tool (default: off; a resumed run keeps its own "
+                            "observation)")
     train.add_argument("--acting-layers", action="store_true",
                        help="train through the acting layers that reshape or refuse the policy's step: shield, "
                             "workspace guard, arm's rule (ActingConfig.training; kept on --resume)")
@@ -578,6 +584,9 @@ def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
         config = replace(config, share_features=False)
     if args.suite is not None:
         config = replace(config, suite=args.suite)
+    rays = {name: getattr(args, name) for name in ("tip_back", "slanted") if getattr(args, name) is not None}
+    if rays:
+        config = replace(config, observation=replace(config.observation, **rays))
     overrides: dict = {}
     for name in ("collision_weight", "progress_weight", "proximity_weight", "shield_weight",
                  "progress_around_obstacles"):

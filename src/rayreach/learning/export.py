@@ -10,7 +10,8 @@ from rayreach.learning.bundles import CheckpointError, _json_default, read_bundl
 
 def train_command(config: dict, out: str | Path) -> str:
     """The ``rayreach train`` command line a run's saved configuration stands for, with the
-    flags that stay on through ``--resume`` (the suite, acting layers, a fixed obstacle count); flags
+    flags that stay on through ``--resume`` (the suite, acting layers, rays beyond the recipe's for
+    the robot, a fixed obstacle count); flags
     given to one part only (``--freeze-features``, ``--critic-warmup``) are not saved."""
     command = (f"rayreach train --robot {config['robot']} --timesteps {config['timesteps']} --envs {config['envs']} "
                f"--out {out} --checkpoint-every {config['checkpoint_every']}")
@@ -21,6 +22,14 @@ def train_command(config: dict, out: str | Path) -> str:
         command += f" --suite {config['suite']}"
     if config.get("acting_layers"):
         command += " --acting-layers"
+    observation = config.get("observation")
+    if isinstance(observation, dict) and name in ("default", "paper", "baseline"):
+        from rayreach.learning.train import recipe
+
+        usual = recipe(name, robot=config["robot"]).observation
+        for flag in ("tip_back", "slanted"):
+            if observation.get(flag, False) != getattr(usual, flag):
+                command += f" --{'' if observation.get(flag) else 'no-'}{flag.replace('_', '-')}"
     obstacles = config.get("obstacles", {})
     if obstacles and obstacles["minimum"] == obstacles["maximum"] == obstacles["start"]:
         command += f" --obstacles {obstacles['start']}"
