@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -133,7 +135,7 @@ def test_slanted_rays_see_a_thin_plate_across_the_tool_that_the_wraparound_misse
 
     tool = get_robot("ur5").tool
     config = ObservationConfig.planner()
-    slanted = ObservationConfig(**{**config.__dict__, "slanted": True})
+    slanted = replace(config, slanted=True)
     env = ReachEnv(scenario=plate_over_the_tip(back=tool.length / 2, centre_out=0.1, half=0.07), observation=slanted)
     try:
         obs, _ = env.reset(seed=0)

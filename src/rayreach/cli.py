@@ -584,7 +584,9 @@ def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
         config = replace(config, share_features=False)
     if args.suite is not None:
         config = replace(config, suite=args.suite)
-    rays = {name: getattr(args, name) for name in ("tip_back", "slanted") if getattr(args, name) is not None}
+    from rayreach.sim.sensors import EXTRA_RAYS
+
+    rays = {name: getattr(args, name) for name in EXTRA_RAYS if getattr(args, name) is not None}
     if rays:
         config = replace(config, observation=replace(config.observation, **rays))
     overrides: dict = {}

@@ -45,7 +45,7 @@ from rayreach.env.rewards import RewardWeights
 from rayreach.robots import RobotSpec, get_robot
 from rayreach.robots.urdf import TOOL_LINK
 from rayreach.sim.kinematics import STEP_IK, IKParams, IKResult, Kinematics
-from rayreach.sim.sensors import N_RAYS, N_SLANTED, N_TIP_BACK, RAY_RANGE, RayModel
+from rayreach.sim.sensors import N_RAYS, RAY_RANGE, RayModel, extra_sets
 
 UNITS = ("fraction", "m")
 """How ray readings may come: hit fractions of the range in [0, 1], or metres."""
@@ -214,18 +214,12 @@ class ArmController:
             raise ValueError(f"joint angles outside the robot's limits: {names}")
         return q
 
-    def _extra_counts(self) -> list[tuple[str, int]]:
-        """The ray sets the policy reads after the 129, by name and count, in their order."""
-        c = self.policy.observation
-        return [(name, n) for name, n, on in (("tip-back", N_TIP_BACK, c.tip_back), ("slanted", N_SLANTED, c.slanted))
-                if on]
-
     def _fractions(self, readings: Any, unit: str) -> np.ndarray:
         if unit not in UNITS:
             raise ValueError(f"unknown unit '{unit}'; valid: {', '.join(UNITS)}")
         r = np.array(readings, dtype=float).reshape(-1)  # a copy, as in _vector
         if r.shape != (self.n_readings,):
-            what = f"{N_RAYS} rays" + "".join(f", then the {n} {name} rays" for name, n in self._extra_counts())
+            what = f"{N_RAYS} rays" + "".join(f", then the {n} {name} rays" for name, n, _ in extra_sets(self.policy.observation.tip_back, self.policy.observation.slanted))
             raise ValueError(f"readings must hold the {what} in the layout's order (docs/rays.md, rayreach rays), "
                              f"got {np.asarray(readings).shape}")
         if not np.all(np.isfinite(r)) or np.any(r < 0):

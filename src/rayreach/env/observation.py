@@ -37,7 +37,7 @@ from dataclasses import dataclass
 import gymnasium as gym
 import numpy as np
 
-from rayreach.sim.sensors import N_RAYS, N_SLANTED, N_TIP_BACK
+from rayreach.sim.sensors import N_RAYS, extra_sets
 from rayreach.sim.transforms import matrix_to_rpy
 
 N_ROBOT_OBS = 13
@@ -86,7 +86,7 @@ class ObservationConfig:
     success on UR5 worlds (docs/training.md, "The goal under a cover")."""
     slanted: bool = False
     """Rays beside the paper's 129, slanted along the tool, that meet a thin plate lying across
-    it (docs/training.md, "Slanted rays"); read after the tip-back rays."""
+    it (docs/training.md, "Rays slanted along the tool"); read after the tip-back rays."""
 
     def __post_init__(self) -> None:
         if self.scans < 0:
@@ -111,7 +111,7 @@ class ObservationConfig:
     @property
     def extra_rays(self) -> int:
         """Rays read beyond the paper's 129 (``rayreach.sim.sensors.extra_layout``)."""
-        return N_TIP_BACK * self.tip_back + N_SLANTED * self.slanted
+        return sum(n for _, n, _ in extra_sets(self.tip_back, self.slanted))
 
 
 class Observer:

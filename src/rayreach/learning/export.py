@@ -23,13 +23,14 @@ def train_command(config: dict, out: str | Path) -> str:
     if config.get("acting_layers"):
         command += " --acting-layers"
     observation = config.get("observation")
-    if isinstance(observation, dict) and name in ("default", "paper", "baseline"):
-        from rayreach.learning.train import recipe
+    from rayreach.learning.train import RECIPES, recipe
+    from rayreach.sim.sensors import EXTRA_RAYS
 
+    if isinstance(observation, dict) and name in RECIPES:
         usual = recipe(name, robot=config["robot"]).observation
-        for flag in ("tip_back", "slanted"):
-            if observation.get(flag, False) != getattr(usual, flag):
-                command += f" --{'' if observation.get(flag) else 'no-'}{flag.replace('_', '-')}"
+        for field, (flag, _, _) in EXTRA_RAYS.items():
+            if observation.get(field, False) != getattr(usual, field):
+                command += f" --{'' if observation.get(field) else 'no-'}{flag}"
     obstacles = config.get("obstacles", {})
     if obstacles and obstacles["minimum"] == obstacles["maximum"] == obstacles["start"]:
         command += f" --obstacles {obstacles['start']}"

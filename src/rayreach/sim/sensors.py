@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Protocol
+from typing import Callable, Protocol
 
 import numpy as np
 
@@ -117,9 +117,20 @@ def slanted_layout(spec: RobotSpec) -> list[RayGroup]:
     return [RayGroup("tool", np.array(origins), np.array(directions))]
 
 
+EXTRA_RAYS = {"tip_back": ("tip-back", N_TIP_BACK, tip_back_layout), "slanted": ("slanted", N_SLANTED, slanted_layout)}
+"""The ray sets an observation may read after the paper's 129, in that order, by their
+``ObservationConfig`` field: name, count, layout."""
+
+
+def extra_sets(tip_back: bool, slanted: bool) -> list[tuple[str, int, Callable[[RobotSpec], list[RayGroup]]]]:
+    """The ``EXTRA_RAYS`` entries an observation with these fields reads, in observation order."""
+    wanted = {"tip_back": tip_back, "slanted": slanted}
+    return [entry for field, entry in EXTRA_RAYS.items() if wanted[field]]
+
+
 def extra_layout(spec: RobotSpec, tip_back: bool, slanted: bool) -> list[RayGroup]:
     """The rays an observation reads after the paper's 129: the tip-back rays, then the slanted."""
-    return [*(tip_back_layout(spec) if tip_back else []), *(slanted_layout(spec) if slanted else [])]
+    return [group for _, _, layout in extra_sets(tip_back, slanted) for group in layout(spec)]
 
 
 def mount_offset(mount: SensorMount) -> np.ndarray:
@@ -134,11 +145,9 @@ def layout_rows(spec: RobotSpec, tip_back: bool = False, slanted: bool = False) 
     rows = []
     groups = list(zip(ray_layout(spec), SENSOR_SLICES.items()))
     start = N_RAYS
-    for name, wanted, layout in (("tip-back", tip_back, tip_back_layout), ("slanted", slanted, slanted_layout)):
-        if wanted:
-            group = layout(spec)[0]
-            groups.append((group, (name, slice(start, start + len(group.origins)))))
-            start += len(group.origins)
+    for name, n, layout in extra_sets(tip_back, slanted):
+        groups.append((layout(spec)[0], (name, slice(start, start + n))))
+        start += n
     for group, (sensor, block) in groups:
         mount = spec.mounts[group.mount]
         if mount.frame != spec.n_joints:
