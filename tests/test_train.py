@@ -173,10 +173,10 @@ def test_recipes_round_trip_through_bundle_meta_and_old_metas_read_as_baseline()
     state.learning_rate = 0.0015
     for name in RECIPES:
         config = recipe(name, robot="kr16", timesteps=1234)
-        meta = json.loads(json.dumps(bundle_meta(config, state, 0, "checkpoint")))  # as a bundle stores it
+        meta = json.loads(json.dumps(bundle_meta(config, state, 0, "checkpoint", 142)))  # as a bundle stores it
         assert config_from_meta(meta) == config
         assert TrainState.from_dict(meta["state"]).learning_rate == 0.0015
-    old = bundle_meta(RECIPES["baseline"], state, 0, "checkpoint")
+    old = bundle_meta(RECIPES["baseline"], state, 0, "checkpoint", 142)
     for new_field in ("vec_env", "lr_schedule", "desired_kl"):  # a run saved before these existed
         del old["config"][new_field]
     assert config_from_meta(old) == RECIPES["baseline"]

@@ -55,6 +55,7 @@ def _pick_scenario(args: argparse.Namespace, parser: argparse.ArgumentParser) ->
 
 def build_parser() -> argparse.ArgumentParser:
     from rayreach.learning.demonstrations import EXPERTS, CloneConfig  # numpy only
+    from rayreach.learning.distill import DistillConfig  # numpy only
     from rayreach.acting.detour import Detour  # numpy only
     from rayreach.acting.final_approach import FinalApproach  # numpy only
     from rayreach.acting.shield import ACTING_SAFETY  # numpy only
@@ -184,6 +185,9 @@ def build_parser() -> argparse.ArgumentParser:
     train.add_argument("--slanted", action=argparse.BooleanOptionalAction, default=None,
                        help="read the 32 slanted rays along the tool (default: off; a resumed run keeps its own "
                             "observation)")
+    train.add_argument("--privileged", action="store_true",
+                       help="train a teacher that also sees how near each part of the arm is to the obstacles and "
+                            "how they move (batched worlds only; distil it with 'rayreach distill')")
     train.add_argument("--acting-layers", action="store_true",
                        help="train through the acting layers that reshape or refuse the policy's step: shield, "
                             "workspace guard, arm's rule (ActingConfig.training; kept on --resume)")
@@ -305,6 +309,16 @@ def build_parser() -> argparse.ArgumentParser:
     clone.add_argument("--eval-episodes", type=int, default=CloneConfig.eval_episodes,
                        help="expert-world episodes that measure the actor before and after")
 
+    distil = sub.add_parser("distill", help="distil a privileged teacher (train --privileged) into a policy that "
+                                            "sees only its rays (DAgger); fine-tune it with train --resume")
+    distil.add_argument("--teacher", required=True, type=Path, help="the teacher's model.zip or checkpoint.zip")
+    distil.add_argument("--out", required=True, type=Path, help="run directory of the student")
+    distil.add_argument("--steps", type=int, default=DistillConfig.steps, help="environment steps in all")
+    distil.add_argument("--teacher-steps", type=int, default=DistillConfig.teacher_steps,
+                        help="steps over which the teacher's share of the driving falls from 1 to 0")
+    distil.add_argument("--envs", type=int, default=DistillConfig.envs, help="worlds stepped at once")
+    distil.add_argument("--resume", action="store_true", help="continue an interrupted distillation in --out")
+
     robots = sub.add_parser("robots", help="the robots: URDF package, joints, shipped policy, Gymnasium id")
     robots.add_argument("--json", action="store_true", help="print one JSON list")
 
@@ -384,6 +398,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _rollout(args, _pick_scenario(args, parser))
         if args.command == "clone":
             return _clone(args)
+        if args.command == "distill":
+            return _distill(args, argv)
     except KeyboardInterrupt as exc:
         print(f"rayreach {args.command}: {exc or 'interrupted'}", file=sys.stderr)
         return 130
@@ -587,6 +603,8 @@ def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
     from rayreach.sim.sensors import EXTRA_RAYS
 
     rays = {name: getattr(args, name) for name in EXTRA_RAYS if getattr(args, name) is not None}
+    if args.privileged:
+        rays["privileged"] = True
     if rays:
         config = replace(config, observation=replace(config.observation, **rays))
     overrides: dict = {}
@@ -607,7 +625,7 @@ def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
             raise ValueError(f"--learning-rate must be > 0, got {args.learning_rate}")
         overrides["learning_rate"] = args.learning_rate
     config = replace(config, **overrides)
-    command = "rayreach " + " ".join(sys.argv[1:] if argv is None else argv)
+    command = _command_line(argv)
     path = train(config, out, resume=args.resume, command=command, resume_overrides=overrides,
                  critic_warmup=args.critic_warmup, freeze_features=args.freeze_features)
     print(f"model: {path}")
@@ -633,7 +651,7 @@ def _sweep(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
         outcome = result.error or f"model {result.model} ({result.seconds:.0f} s)"
         print(f"{result.trial.name} ({result.state}): {outcome}", flush=True)
 
-    command = "rayreach " + " ".join(sys.argv[1:] if argv is None else argv)
+    command = _command_line(argv)
     results = sweep(trials, ray_address=args.ray, use_ray=args.ray is not None, cpus=args.cpus,
                     command=command, report=report)
     failed = [r.trial.name for r in results if r.error]
@@ -725,6 +743,22 @@ def _rollout(args: argparse.Namespace, scenario: str) -> int:
         n = counts["episodes"]
         print(f"  {kind:>13}: {n:4d} worlds, " + ", ".join(
             f"{k.replace('_', ' ')} {counts[k] / n:.0%}" for k in counts if k != "episodes"))
+    return 0
+
+
+def _command_line(argv: Sequence[str] | None) -> str:
+    """The command as typed, for a run's metadata."""
+    return "rayreach " + " ".join(sys.argv[1:] if argv is None else argv)
+
+
+def _distill(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
+    from rayreach.learning.distill import DistillConfig, distill
+
+    config = DistillConfig(steps=args.steps, teacher_steps=args.teacher_steps, envs=args.envs)
+    command = _command_line(argv)
+    checkpoint = distill(args.teacher, args.out, config, resume=args.resume, command=command)
+    print(f"student written to {checkpoint}; fine-tune it with: rayreach train --robot ROBOT --out {args.out} "
+          "--resume --timesteps N")
     return 0
 
 

@@ -49,6 +49,7 @@ from rayreach.env.rewards import ShakeCounter
 from rayreach.scenarios import RANDOM, Scenario
 from rayreach.scenarios.feasibility import solve_start, validate
 from rayreach.scenarios.suites import suite_workspace, world_sampler
+from rayreach.sim.batch_clearance import PER_SPHERE, SPEED_SCALE, clearance
 from rayreach.sim.batch_collision import CollisionWorlds, candidates
 from rayreach.sim.batch_kinematics import solve_steps
 from rayreach.sim.batch_obstacles import ObstacleBatch
@@ -142,6 +143,8 @@ class BatchedReachEnv(VecEnv):
         self.base_obs = np.zeros((n, OBS_SIZE), dtype=np.float32)
         """The paper's 142 values of each world; ``observer.obs`` is the observation."""
         self.observer = Observer(cfg.observation, n, N_RAYS, OBS_SIZE, spec.ee_step)
+        self.privileged = np.zeros((n, PER_SPHERE * len(self.spheres.frame) if cfg.observation.privileged else 0))
+        """A teacher's values after the observer's (``rayreach.sim.batch_clearance``); none without."""
         self._all = np.arange(n)
         self._actions = np.zeros((n, 6))
         self._fixed_start: np.ndarray | None = None
@@ -149,10 +152,24 @@ class BatchedReachEnv(VecEnv):
         """Seconds spent in each stage of ``step_wait`` so far (a few perf_counter calls a step)."""
         if fixed is not None:
             self._load_fixed(fixed)
-        super().__init__(n, self.observer.space(observation_space(spec, ws_high - ws_low)),
+        super().__init__(n, self._space(self.observer.space(observation_space(spec, ws_high - ws_low))),
                          gym.spaces.Box(-1.0, 1.0, (6,), np.float32))
         if seed is not None:
             self.seed(seed)
+
+    def _space(self, observed: gym.spaces.Box) -> gym.spaces.Box:
+        """``observed`` with the privileged values' bounds after it, where there are any."""
+        k = self.privileged.shape[1] // PER_SPHERE
+        if not k:
+            return observed
+        bound = np.tile(np.r_[np.ones(3), np.full(3, 1.0 / SPEED_SCALE)], k).astype(np.float32)
+        return gym.spaces.Box(np.r_[observed.low, -bound], np.r_[observed.high, bound], dtype=np.float32)
+
+    def _obs(self) -> np.ndarray:
+        """Every world's observation now: the observer's, then the privileged values."""
+        if not self.privileged.shape[1]:
+            return self.observer.obs.copy()
+        return np.concatenate((self.observer.obs, self.privileged.astype(np.float32)), axis=1)
 
     def _load_fixed(self, scenario: Scenario) -> None:
         self._fixed_start = q_start = solve_start(scenario, self.kin)
@@ -201,7 +218,7 @@ class BatchedReachEnv(VecEnv):
             self.reset_world(i)
         self._reset_seeds()
         self._reset_options()
-        return self.observer.obs.copy()
+        return self._obs()
 
     def reset_world(self, i: int) -> None:
         """``ReachEnv.reset`` for world ``i``, its observation written into ``observer.obs[i]``."""
@@ -235,6 +252,7 @@ class BatchedReachEnv(VecEnv):
         self._cast(which)
         self._observe(which, self.previous_distance)
         self.observer.reset(which, *self._observer_args(which))
+        self._sense_privileged(which)
 
     def step_async(self, actions: np.ndarray) -> None:
         a = np.asarray(actions, dtype=float).reshape(self.num_envs, -1)
@@ -302,6 +320,8 @@ class BatchedReachEnv(VecEnv):
         self.previous_way = way
         self._observe(self._all, distance)
         self.observer.step(self._all, *self._observer_args(self._all))
+        self._sense_privileged(self._all)
+        obs = self._obs()
 
         dones = terminated | truncated
         clock.lap("reward_and_obs")
@@ -324,11 +344,13 @@ class BatchedReachEnv(VecEnv):
                 "n_shakes": int(n_shakes[i]),
                 "time": float(self.time[i]),
                 "TimeLimit.truncated": bool(truncated[i]),
-                "terminal_observation": self.observer.obs[i].copy(),
+                "terminal_observation": obs[i].copy(),
             }
             self.reset_world(int(i))
+        if dones.any():
+            obs = self._obs()  # the reset worlds' first observation
         clock.lap("resets")
-        return self.observer.obs.copy(), rewards.astype(np.float32), dones, infos
+        return obs, rewards.astype(np.float32), dones, infos
 
     def _ways(self, which: np.ndarray, distance: np.ndarray, new_goal: bool = True) -> np.ndarray:
         """What the progress term measures for worlds ``which``: the way round the obstacles to
@@ -359,6 +381,10 @@ class BatchedReachEnv(VecEnv):
         cast_worlds(self.layout, self.frames, self.obstacles, cfg.ray_range, which, self.fractions)
         if self.extra_layout is not None:
             cast_worlds(self.extra_layout, self.frames, self.obstacles, cfg.ray_range, which, self.extra_fractions)
+
+    def _sense_privileged(self, which: np.ndarray) -> None:
+        if self.privileged.shape[1]:
+            clearance(self.frames, self.spheres, self.obstacles, self.time, self.ee_rot, which, self.privileged)
 
     def _observer_args(self, which: np.ndarray) -> tuple:
         """Worlds ``which``'s rows of ``Observer.reset``'s and ``step``'s arguments after ``which``."""

@@ -27,12 +27,15 @@ tip_back             24      fractions of the rays from the tool tip that look b
                              the arm (``rayreach.sim.sensors.tip_back_layout``), now
 slanted              32      fractions of the rays slanted along the tool
                              (``rayreach.sim.sensors.slanted_layout``), now
+privileged           6 per   a teacher's only (``BatchedReachEnv``): for each of the arm's
+                     sphere  collision spheres, the nearest obstacle's direction and motion
+                             (``rayreach.sim.batch_clearance``)
 ===================  ======  =============================================================
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import gymnasium as gym
 import numpy as np
@@ -87,6 +90,11 @@ class ObservationConfig:
     slanted: bool = False
     """Rays beside the paper's 129, slanted along the tool, that meet a thin plate lying across
     it (docs/training.md, "Rays slanted along the tool"); read after the tip-back rays."""
+    privileged: bool = False
+    """What only the simulator knows, after everything else: how near each of the arm's
+    collision spheres is to the obstacles and how they move (``rayreach.sim.batch_clearance``).
+    A teacher's observation, for distillation into a policy without it (``rayreach.learning.
+    distill``); only ``BatchedReachEnv`` computes it."""
 
     def __post_init__(self) -> None:
         if self.scans < 0:
@@ -101,10 +109,16 @@ class ObservationConfig:
 
     @property
     def is_paper(self) -> bool:
-        return self.extra_size(0) == 0
+        return self.extra_size(0) == 0 and not self.privileged
+
+    @property
+    def deployable(self) -> "ObservationConfig":
+        """This observation without the privileged part: what a student of a teacher sees."""
+        return replace(self, privileged=False)
 
     def extra_size(self, n_rays: int) -> int:
-        """Values appended after the paper's, for ``n_rays`` rays."""
+        """Values appended after the paper's, for ``n_rays`` rays (the privileged part, whose
+        size depends on the robot, is the env's to add)."""
         return (6 * self.goal_direction + 6 * self.workspace + 3 * self.motion + self.scans * (n_rays + 3)
                 + self.extra_rays)
 

@@ -232,6 +232,10 @@ class ReachEnv(gym.Env):
 
     def set_observation(self, observation: ObservationConfig) -> None:
         """What the observation holds from the next reset on (a policy's ``observation``)."""
+        if observation.privileged:
+            raise ValueError("the privileged observation (a teacher's, ObservationConfig.privileged) is computed by "
+                             "BatchedReachEnv only; step a teacher there, or use its student's observation "
+                             "(ObservationConfig.deployable)")
         self.config = make_config(self.config, {"observation": observation})
         self.observer = Observer(observation, 1, N_RAYS, OBS_SIZE, self.spec_robot.ee_step)
         self.observation_space = self.observer.space(self._paper_space)

@@ -31,6 +31,8 @@ def train_command(config: dict, out: str | Path) -> str:
         for field, (flag, _, _) in EXTRA_RAYS.items():
             if observation.get(field, False) != getattr(usual, field):
                 command += f" --{'' if observation.get(field) else 'no-'}{flag}"
+        if observation.get("privileged"):
+            command += " --privileged"
     obstacles = config.get("obstacles", {})
     if obstacles and obstacles["minimum"] == obstacles["maximum"] == obstacles["start"]:
         command += f" --obstacles {obstacles['start']}"

@@ -160,6 +160,9 @@ class TrainConfig:
         if self.acting_layers and self.envs > ACTING_ENVS:
             raise ValueError(f"with acting layers each of the {self.envs} worlds is its own ReachEnv (about 56 MB "
                              f"and 0.5 s to build); give it {ACTING_ENVS} or fewer (--envs, or --recipe baseline: 32)")
+        if self.observation.privileged and not self.batched:
+            raise ValueError("a privileged observation (a teacher's) is computed by the batched env only: "
+                             "vec_env 'batched' without acting layers")
         if self.lr_schedule not in LR_SCHEDULES:
             raise ValueError(f"lr_schedule must be one of {', '.join(LR_SCHEDULES)}; "
                              f"got {self.lr_schedule!r}")
@@ -386,6 +389,9 @@ class TrainState:
     """Outcomes of the last episodes played at the true goal size."""
     learning_rate: float | None = None
     """The adaptive schedule's step size now (None: not adapted yet, the config's)."""
+    distilled: dict[str, Any] | None = None
+    """Where the run started as a student of a privileged teacher: the distillation's report
+    (``rayreach.learning.distill``); PPO went on from it."""
 
     def rate(self, outcome: str, true_size: bool = False) -> float:
         recent = self.recent_true if true_size else self.recent
@@ -406,6 +412,7 @@ class TrainState:
             "recent": list(self.recent),
             "recent_true": list(self.recent_true),
             "learning_rate": self.learning_rate,
+            "distilled": self.distilled,
         }
 
     @classmethod
@@ -418,6 +425,7 @@ class TrainState:
             deque(data.get("recent", []), maxlen=RECENT),
             deque(data.get("recent_true", []), maxlen=RECENT),
             data.get("learning_rate"),
+            data.get("distilled"),
         )
 
 
@@ -558,7 +566,8 @@ def _make_callback(config: TrainConfig, state: TrainState, out: Path, total: int
 
         def save_checkpoint(self) -> None:
             state.wall_time = self.wall_time()
-            save_bundle(self.model, out / CHECKPOINT, bundle_meta(config, state, self.num_timesteps, "checkpoint"),
+            save_bundle(self.model, out / CHECKPOINT, bundle_meta(config, state, self.num_timesteps, "checkpoint",
+                                    self.model.observation_space.shape[0]),
                         self.model.get_vec_normalize_env())
 
         def _on_training_end(self) -> None:
@@ -599,14 +608,11 @@ def git_commit() -> str:
         return "unknown"
 
 
-def bundle_meta(config: TrainConfig, state: TrainState, steps: int, kind: str) -> dict[str, Any]:
-    from rayreach.env.reach import OBS_SIZE
-    from rayreach.sim.sensors import N_RAYS
-
+def bundle_meta(config: TrainConfig, state: TrainState, steps: int, kind: str, obs_size: int) -> dict[str, Any]:
     return {
         "kind": kind,
         "robot": config.robot,
-        "obs_shape": [OBS_SIZE + config.observation.extra_size(N_RAYS)],
+        "obs_shape": [int(obs_size)],
         "timesteps": int(steps),
         "config": asdict(config),
         "state": state.to_dict(),
@@ -702,7 +708,7 @@ def train(config: TrainConfig, out: str | Path, resume: bool = False, command: s
             callback.save_checkpoint()  # the callback is bound to the model only once learn() ran
         if interrupted:
             raise KeyboardInterrupt(f"interrupted at {model.num_timesteps} steps; resume with --resume")
-        meta = bundle_meta(config, state, model.num_timesteps, "model")
+        meta = bundle_meta(config, state, model.num_timesteps, "model", model.observation_space.shape[0])
         meta["command"] = command
         path = save_bundle(model, out / MODEL, meta, model.get_vec_normalize_env())
         plot_curve(out / CURVE, out / CURVE_PNG, title=f"{config.robot.upper()} training")
