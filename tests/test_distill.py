@@ -104,6 +104,7 @@ def test_dagger_fits_the_student_to_the_teacher_and_ppo_fine_tunes_it(tmp_path):
     assert size == len(student_norm["obs_mean"]) < len(norm["obs_mean"])
     assert np.array_equal(student_norm["obs_mean"], norm["obs_mean"][:size])
     assert student_meta["state"]["distilled"]["steps"] == config.steps
+    assert (out / "distill.png").stat().st_size > 1000  # the curve, drawn
 
     train(replace(config_from_meta(student_meta), timesteps=256), out, resume=True)
     final, _ = read_bundle_meta(out / "model.zip")

@@ -7,7 +7,7 @@ observation without that part (``ObservationConfig.deployable``), its prefix, so
 env and the teacher's normalisation serve both. DAgger (Ross et al. 2011), as legged
 locomotion's teacher-student training does it: the worlds are stepped by the teacher at
 first and by the student more and more (``beta``), every visited state is labelled with the
-teacher's action and value, and the student's actor and critic regress on an aggregate of
+teacher's action (its mean, clipped to the action bounds as the env would clip it) and value, and the student's actor and critic regress on an aggregate of
 the latest labels. The student is saved as a training checkpoint of the default recipe, so
 ``rayreach train --resume`` fine-tunes it by PPO with the teacher's curricula.
 
@@ -30,6 +30,7 @@ from rayreach.learning.bundles import CheckpointError, Normalization, read_bundl
 
 REPORT = "distill.json"
 CURVE = "distill.csv"
+CURVE_PNG = "distill.png"
 
 
 @dataclass(frozen=True)
@@ -37,18 +38,18 @@ class DistillConfig:
     """One distillation; the defaults took a UR5 teacher's student to its level in minutes
     (docs/training.md, "A privileged teacher")."""
 
-    steps: int = 4_000_000
+    steps: int = 3_000_000
     """Environment steps stepped in all (worlds x steps per world)."""
     envs: int = 256
     rollout: int = 32
     """Steps of every world between two fits."""
-    teacher_steps: int = 1_000_000
+    teacher_steps: int = 750_000
     """``beta``, the chance that a world is stepped by the teacher's action, falls linearly from
     1 to 0 over these first steps; after them the student drives."""
     buffer: int = 1_000_000
     """Labelled states kept, the oldest dropped (577 floats each: 2.3 GB)."""
     minibatch: int = 4096
-    fits: int = 8
+    fits: int = 6
     """Minibatches drawn from the aggregate after each rollout."""
     learning_rate: float = 5e-4
     value_weight: float = 0.5
@@ -166,7 +167,7 @@ def distill(teacher_path: str | Path, out: str | Path, config: DistillConfig = D
                     label = teacher.get_distribution(xt).distribution.mean.numpy()
                     value = teacher.predict_values(xt).numpy()[:, 0]
                     own = student.get_distribution(xt[:, :size]).distribution.mean.numpy()
-                aggregate.add(x[:, :size], label, value)
+                aggregate.add(x[:, :size], np.clip(label, -1.0, 1.0), value)  # what the env would execute
                 by_teacher = rng.random(config.envs) < share
                 action = np.where(by_teacher[:, None], label, own)
                 raw, _, dones, infos = env.step(np.clip(action, -1.0, 1.0))
@@ -203,9 +204,37 @@ def distill(teacher_path: str | Path, out: str | Path, config: DistillConfig = D
     save_bundle(model, checkpoint, student_meta, student_norm)
     save_bundle(model, out / MODEL, {**student_meta, "kind": "model", "command": command}, student_norm)
     (out / REPORT).write_text(json.dumps(report, indent=2) + "\n")
+    plot_distillation(out / CURVE, out / CURVE_PNG)
     if interrupted:
         raise KeyboardInterrupt(f"interrupted at {done} steps; resume with --resume")
     return checkpoint
+
+
+def plot_distillation(csv_path: Path, png_path: Path) -> Path | None:
+    """The student's own episodes (success, collisions) and its fit to the teacher over the
+    distillation's steps, with the teacher's share of the driving."""
+    import csv
+
+    from rayreach.learning.train import curve_figure, save_curve_figure
+
+    with csv_path.open() as handle:
+        rows = [r for r in csv.DictReader(handle)]
+    if not rows:
+        return None
+    steps = np.array([float(r["steps"]) for r in rows]) / 1e6
+    rate = {k: np.array([float(r[f"student_{k}_rate"] or "nan") for r in rows]) for k in ("success", "collision")}
+    fig, ax1, ax2 = curve_figure()
+    ax1.plot(steps, rate["success"], color="#2b9a3e", label="success (student's own episodes)")
+    ax1.plot(steps, rate["collision"], color="#d62728", label="collision")
+    ax1.plot(steps, [float(r["beta"]) for r in rows], color="#7f7f7f", linestyle="--", label="teacher's share of the driving")
+    ax1.set_ylim(-0.02, 1.02)
+    ax1.set_ylabel("share of last 200 episodes")
+    ax1.set_title("distillation of a privileged teacher")
+    ax1.legend(fontsize=8)
+    ax1.grid(alpha=0.3)
+    ax2.plot(steps, [float(r["action_loss"]) for r in rows], color="#1f5fd6")
+    ax2.set_ylabel("action error (MSE)")
+    return save_curve_figure(fig, ax2, png_path)
 
 
 def _fit(policy, optimiser, obs: np.ndarray, action: np.ndarray, value: np.ndarray,

@@ -733,18 +733,14 @@ def plot_curve(csv_path: Path, png_path: Path, title: str) -> Path | None:
     """The paper's training figure: success rate (and curricula) over environment steps."""
     if not csv_path.exists():
         return None
-    import matplotlib
-
-    matplotlib.use("Agg")
     from rayreach.env.reach import OUTCOMES
-    import matplotlib.pyplot as plt
 
     with csv_path.open() as handle:
         rows = list(csv.DictReader(handle))
     if not rows:
         return None
     steps = np.array([float(r["timesteps"]) for r in rows]) / 1e6
-    fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(8, 6), sharex=True, gridspec_kw={"height_ratios": [2, 1]})
+    fig, ax1, ax2 = curve_figure()
     for outcome, color in zip(OUTCOMES, ("#2b9a3e", "#d62728", "#ff7f0e", "#7f7f7f")):
         ax1.plot(steps, [float(r[f"{outcome}_rate"]) for r in rows], color=color, label=outcome.replace("_", " "))
     true_success = [float(r.get("true_success_rate") or "nan") for r in rows]
@@ -760,8 +756,26 @@ def plot_curve(csv_path: Path, png_path: Path, title: str) -> Path | None:
     ax3 = ax2.twinx()
     ax3.step(steps, [float(r["obstacles"]) for r in rows], color="#8c564b", where="post", label="obstacles")
     ax3.set_ylabel("obstacles")
-    ax2.set_xlabel("environment steps (millions)")
-    ax2.grid(alpha=0.3)
+    return save_curve_figure(fig, ax2, png_path)
+
+
+def curve_figure():
+    """A training figure's two panels over environment steps: rates above, schedules below."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (upper, lower) = plt.subplots(2, 1, figsize=(8, 6), sharex=True, gridspec_kw={"height_ratios": [2, 1]})
+    return fig, upper, lower
+
+
+def save_curve_figure(fig, lower, png_path: Path) -> Path:
+    """Label the shared step axis, write the figure and free it."""
+    import matplotlib.pyplot as plt
+
+    lower.set_xlabel("environment steps (millions)")
+    lower.grid(alpha=0.3)
     fig.tight_layout()
     fig.savefig(png_path, dpi=110)
     plt.close(fig)
