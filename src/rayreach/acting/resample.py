@@ -20,13 +20,20 @@ class ActingPolicy:
     saw; the mean action would repeat, and the arm stay held until the step budget ran out:
     17 of the KR16's 65 failures in 800 random worlds (docs/acting.md). A drawn action goes
     through the same layers as any other. ``reset(seed)`` starts each run, so a seeded run
-    repeats."""
+    repeats.
+
+    A policy trained to decide every ``decision_period`` control steps
+    (``rayreach.env.decisions``) has its action held for that many calls of ``act``, as in
+    training; a held arm draws at once."""
 
     def __init__(self, policy: Policy, deterministic: bool = True, resample: bool = True) -> None:
         self.policy = policy
         self.deterministic = deterministic
         self.resample = resample
         self._rng = np.random.default_rng(0)
+        self.period = int(getattr(policy, "decision_period", 1))
+        self._action: np.ndarray | None = None
+        self._age = 0
 
     @property
     def draws_where_held(self) -> bool:
@@ -35,12 +42,20 @@ class ActingPolicy:
 
     def reset(self, seed: int) -> None:
         self._rng = np.random.default_rng(seed)
+        self._action, self._age = None, 0
 
     def act(self, obs: np.ndarray, info: dict[str, Any] | None = None) -> np.ndarray:
         """The action for ``obs``; ``info``: the last step's (or reset's), which says whether the
         arm was held."""
+        held = self.resample and info is not None and info.get("acting", {}).get("held", False)
+        if self._action is not None and self._age < self.period and not (self.deterministic and held):
+            self._age += 1
+            return self._action
         if not self.deterministic:
-            return self.policy.act(obs, deterministic=False)
-        if self.resample and info is not None and info.get("acting", {}).get("held", False):
-            return self.policy.sample(obs, self._rng)
-        return self.policy.act(obs, deterministic=True)
+            action = self.policy.act(obs, deterministic=False)
+        elif held:
+            action = self.policy.sample(obs, self._rng)
+        else:
+            action = self.policy.act(obs, deterministic=True)
+        self._action, self._age = action, 1
+        return action

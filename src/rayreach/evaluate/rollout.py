@@ -159,7 +159,7 @@ def rollout_batched(
 ) -> RolloutSummary:
     """``rollout`` of the policy alone, deterministic, on drawn worlds, all ``episodes`` worlds
     stepped at once in one ``BatchedReachEnv`` (world ``k`` is the world of seed
-    ``first + k``, as ``rollout`` draws it): one forward pass per step for all worlds."""
+    ``first + k``, as ``rollout`` draws it): one forward pass per decision for all worlds."""
     from rayreach.env.batched import BatchedReachEnv
     from rayreach.env.reach import EnvConfig, episode_outcome
 
@@ -176,8 +176,12 @@ def rollout_batched(
         kinds = [suite_kinds(suite, s) for s in env.scenarios]
         lengths = np.zeros(episodes)
         last = env.ee_pos.copy()
+        step = 0
         while any(r is None for r in records):
-            obs, _, dones, infos = env.step(policy.act(obs, deterministic=True))
+            if step % policy.decision_period == 0:  # every world's first episode starts on step 0
+                action = policy.act(obs, deterministic=True)
+            obs, _, dones, infos = env.step(action)
+            step += 1
             ended = np.asarray(dones, dtype=bool)
             now = np.array([info["ee_position"] if ended[i] else env.ee_pos[i] for i, info in enumerate(infos)])
             lengths += np.linalg.norm(now - last, axis=1)

@@ -38,6 +38,12 @@ class Policy:
         """The drawn worlds it was trained in (``TrainConfig.suite``; "random" before the choice)."""
         return str(self.meta.get("config", {}).get("suite", RANDOM))
 
+    @property
+    def decision_period(self) -> int:
+        """Control steps each of its actions is held for (``TrainConfig.decision_period``; 1
+        where its run predates the choice)."""
+        return int(self.meta.get("config", {}).get("decision_period", 1))
+
     def act(self, obs: np.ndarray, deterministic: bool = True) -> np.ndarray:
         action, _ = self.model.predict(self._normalized(obs), deterministic=deterministic)
         return action

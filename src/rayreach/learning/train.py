@@ -25,6 +25,7 @@ import numpy as np
 
 from rayreach.learning.curriculum import AugmentedGoalSize, GoalSizeParams, ObstacleCurriculum, ObstacleParams
 from rayreach.learning.bundles import CheckpointError, read_bundle_meta, restore_normalization, save_bundle
+from rayreach.env.decisions import check_period
 from rayreach.env.observation import ObservationConfig
 from rayreach.env.rewards import RewardWeights
 from rayreach.scenarios import RANDOM, check_suite
@@ -148,6 +149,10 @@ class TrainConfig:
     """What the policy sees beyond the paper's 142 values (``rayreach.env.observation``; not in
     the paper): the goal's direction, the workspace's walls, its own motion and three ray
     scans of the last 24 steps."""
+    decision_period: int = 1
+    """Control steps each action is held for (``rayreach.env.decisions``; 1, the paper's: a
+    decision every control step). ``timesteps``, ``n_steps`` and the rates of ``curve.csv``
+    count decisions; ``max_episode_steps`` counts control steps. Batched worlds only."""
     checkpoint_every: int = 100_000
     goal: GoalSizeParams = field(default_factory=GoalSizeParams)
     obstacles: ObstacleParams = field(default_factory=ObstacleParams)
@@ -162,6 +167,10 @@ class TrainConfig:
                              f"and 0.5 s to build); give it {ACTING_ENVS} or fewer (--envs, or --recipe baseline: 32)")
         if self.observation.privileged and not self.batched:
             raise ValueError("a privileged observation (a teacher's) is computed by the batched env only: "
+                             "vec_env 'batched' without acting layers")
+        check_period(self.decision_period)
+        if self.decision_period > 1 and not self.batched:
+            raise ValueError("a decision period above 1 holds the actions of the batched worlds: "
                              "vec_env 'batched' without acting layers")
         if self.lr_schedule not in LR_SCHEDULES:
             raise ValueError(f"lr_schedule must be one of {', '.join(LR_SCHEDULES)}; "
@@ -286,9 +295,12 @@ def batched_vec_env(config: TrainConfig):
     from stable_baselines3.common.vec_env import VecMonitor
 
     from rayreach.env.batched import BatchedReachEnv
+    from rayreach.env.decisions import DecisionPeriod
 
     venv = BatchedReachEnv(config.robot, config.envs, scenario=config.suite, config=env_config(config),
                            seed=config.seed)
+    if config.decision_period > 1:
+        venv = DecisionPeriod(venv, config.decision_period)
     return VecMonitor(venv, info_keywords=("is_success",))
 
 
