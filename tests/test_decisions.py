@@ -3,13 +3,16 @@ hold an action for k steps, and nothing else changes."""
 
 from __future__ import annotations
 
+from dataclasses import asdict
+
 import numpy as np
 import pytest
 
 from rayreach.acting import ActingPolicy
 from rayreach.env.batched import BatchedReachEnv
-from rayreach.env.decisions import DecisionPeriod, check_period
-from rayreach.learning.train import TrainConfig
+from rayreach.env.decisions import DecisionPeriod, HeldAction, check_period
+from rayreach.env.reach import ReachEnv
+from rayreach.learning.train import RECIPES, TrainConfig, config_from_meta, recipe
 
 SEED = 300
 
@@ -98,10 +101,44 @@ def test_bad_periods_are_refused(bad):
         check_period(bad)
 
 
-def test_a_period_needs_the_batched_worlds():
-    with pytest.raises(ValueError, match="batched"):
-        TrainConfig(decision_period=4, vec_env="workers")
-    assert TrainConfig(decision_period=4).decision_period == 4
+def test_one_world_decides_the_same_way():
+    """``HeldAction`` over a ``ReachEnv`` is k steps of that env with the action held, ended
+    where its episode ends."""
+    k = 3
+    held = HeldAction(ReachEnv(robot="ur5"), k)
+    plain = ReachEnv(robot="ur5")
+    rng = np.random.default_rng(4)
+    try:
+        obs, _ = held.reset(seed=SEED)
+        np.testing.assert_array_equal(obs, plain.reset(seed=SEED)[0])
+        for _ in range(200):
+            a = _actions(rng, 1)[0]
+            obs, reward, terminated, truncated, _ = held.step(a)
+            total, n = 0.0, 0
+            while n < k:
+                o, r, t, u, _ = plain.step(a)
+                total, n = total + r, n + 1
+                if t or u:
+                    break
+            np.testing.assert_array_equal(obs, o)
+            assert reward == pytest.approx(total) and (terminated, truncated) == (t, u)
+            if terminated or truncated:
+                assert n <= k
+                break
+        else:
+            pytest.fail("no episode ended in 200 decisions of random actions")
+    finally:
+        held.close()
+        plain.close()
+
+
+def test_the_recipes_periods():
+    """The default decides every 4 control steps; the paper's and the baseline's agents every
+    step, and so does a run saved before the choice."""
+    assert recipe("default", robot="kr16").decision_period == 4
+    assert RECIPES["paper"].decision_period == RECIPES["baseline"].decision_period == 1
+    saved = {"config": {k: v for k, v in asdict(TrainConfig()).items() if k != "decision_period"}}
+    assert config_from_meta(saved).decision_period == 1
 
 
 class _CountingPolicy:

@@ -157,8 +157,11 @@ def test_exported_command_keeps_the_flags_a_resume_keeps():
     assert train_command({**base, "recipe": "paper"}, "RUN").startswith("rayreach train --recipe paper --robot kr16")
     fixed = {**base, "acting_layers": True, "obstacles": {"start": 1, "minimum": 1, "maximum": 1}}
     assert train_command(fixed, "RUN").endswith("--checkpoint-every 250000 --acting-layers --obstacles 1 [--resume]")
-    assert train_command({**base, "recipe": "default", "suite": "broad"}, "RUN").endswith(
+    assert train_command({**base, "recipe": "default", "suite": "broad", "decision_period": 4}, "RUN").endswith(
         "--checkpoint-every 250000 --suite broad [--resume]")
+    # a default run made before the decision period decided every control step
+    assert train_command({**base, "recipe": "default"}, "RUN").endswith("--decision-period 1 [--resume]")
+    base = {**base, "decision_period": 4}
     slanted = asdict(replace(recipe("default", robot="kr16").observation, slanted=True))
     assert train_command({**base, "recipe": "default", "observation": slanted}, "RUN").endswith(
         "--checkpoint-every 250000 --slanted [--resume]")

@@ -17,7 +17,7 @@ TRAIN_RECIPES = ("default", "baseline", "paper")
 COMPARE_VARIANTS = ("baseline", "default", "paper", "paper-observation", "no-scans", "long-scans", "no-workspace", "entropy",
                     "around-obstacles", "proximity", "gamma-0.995", "gamma-0.998",
                     "tip-back", "no-tip-back", "collision-20", "collision-40", "separate-features", "wide",
-                    "decide-2", "decide-4", "slanted", "slanted-no-tip-back")
+                    "decide-1", "decide-2", "decide-8", "slanted", "slanted-no-tip-back")
 """``rayreach.evaluate.compare_recipes.VARIANTS``' names."""
 ROBOT_HELP = " or ".join(ROBOTS)
 
@@ -185,6 +185,9 @@ def build_parser() -> argparse.ArgumentParser:
     train.add_argument("--slanted", action=argparse.BooleanOptionalAction, default=None,
                        help="read the 32 slanted rays along the tool (default: off; a resumed run keeps its own "
                             "observation)")
+    train.add_argument("--decision-period", type=int, default=None, metavar="K",
+                       help="control steps each action is held for (default: the recipe's, 4; the paper's 1; "
+                            "a resumed run keeps its own)")
     train.add_argument("--privileged", action="store_true",
                        help="train a teacher that also sees how near each part of the arm is to the obstacles and "
                             "how they move (batched worlds only; distil it with 'rayreach distill')")
@@ -600,6 +603,8 @@ def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
         config = replace(config, share_features=False)
     if args.suite is not None:
         config = replace(config, suite=args.suite)
+    if args.decision_period is not None:
+        config = replace(config, decision_period=args.decision_period)
     from rayreach.sim.sensors import EXTRA_RAYS
 
     rays = {name: getattr(args, name) for name in EXTRA_RAYS if getattr(args, name) is not None}

@@ -11,11 +11,13 @@ collision checks and the rays at the control rate and lets the policy decide les
 one of its steps is ``period`` steps of the worlds with the same action, the rewards summed.
 A world whose episode ends within a step reports that end (its last info, observation and
 reward) and stands still for the step's rest, so its next episode starts on a decision.
-``ActingPolicy`` holds the action the same way where one world is stepped at a time.
+``HeldAction`` does the same for one ``ReachEnv`` (the per-world training worlds), and
+``ActingPolicy`` holds the action the same way where a policy acts.
 """
 
 from __future__ import annotations
 
+import gymnasium as gym
 import numpy as np
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvWrapper
 
@@ -57,3 +59,22 @@ class DecisionPeriod(VecEnvWrapper):
             if ended.all():
                 break
         return obs, rewards, ended, infos
+
+
+class HeldAction(gym.Wrapper):
+    """One ``ReachEnv`` (or ``ActingEnv``) deciding every ``period`` control steps: a step is
+    ``period`` steps of ``env`` with the same action, the rewards summed, until its episode
+    ends. The info is the last control step's."""
+
+    def __init__(self, env: gym.Env, period: int) -> None:
+        super().__init__(env)
+        self.period = check_period(period)
+
+    def step(self, action):
+        total = 0.0
+        for _ in range(self.period):
+            obs, reward, terminated, truncated, info = self.env.step(action)
+            total += float(reward)
+            if terminated or truncated:
+                break
+        return obs, total, terminated, truncated, info

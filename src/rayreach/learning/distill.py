@@ -108,6 +108,7 @@ def distill(teacher_path: str | Path, out: str | Path, config: DistillConfig = D
     from tqdm import tqdm
 
     from rayreach.env.batched import BatchedReachEnv
+    from rayreach.env.decisions import DecisionPeriod
     from rayreach.env.reach import episode_outcome
     from rayreach.learning.train import (CHECKPOINT, MODEL, TrainState, append_curve, build_model, bundle_meta,
                                          config_from_meta, env_config)
@@ -143,6 +144,7 @@ def distill(teacher_path: str | Path, out: str | Path, config: DistillConfig = D
     env.set_goal_tolerance(state.goal.size)
     env.set_n_obstacles(state.obstacles.count)
     size = env.observer.size
+    stepper = DecisionPeriod(env, teacher_config.decision_period)  # the student decides as its teacher did
     teacher = PPO.load(str(teacher_path), device="cpu").policy
     model = (PPO.load(str(checkpoint), device="cpu") if resume
              else build_model(student_config, _student_view(env, size), None))
@@ -156,7 +158,7 @@ def distill(teacher_path: str | Path, out: str | Path, config: DistillConfig = D
     interrupted = False
     previous = signal.signal(signal.SIGTERM, _raise_interrupt)
     bar = tqdm(total=config.steps, initial=done, unit="step", desc="distill", disable=not progress, smoothing=0.05)
-    raw = env.reset()
+    raw = stepper.reset()
     try:
         while done < config.steps:
             share = beta(done, config.teacher_steps)
@@ -170,7 +172,7 @@ def distill(teacher_path: str | Path, out: str | Path, config: DistillConfig = D
                 aggregate.add(x[:, :size], np.clip(label, -1.0, 1.0), value)  # what the env would execute
                 by_teacher = rng.random(config.envs) < share
                 action = np.where(by_teacher[:, None], label, own)
-                raw, _, dones, infos = env.step(np.clip(action, -1.0, 1.0))
+                raw, _, dones, infos = stepper.step(np.clip(action, -1.0, 1.0))
                 for i in np.flatnonzero(dones & ~by_teacher):  # the student's own episodes
                     outcomes.append(episode_outcome(infos[i]))
                 done += config.envs

@@ -37,7 +37,7 @@ DEFAULT_OPSET = 17
 ONNX_FORMAT = 2
 """Version of the metadata layout below (``rayreach.format``)."""
 META_KEYS = ("robot", "kind", "obs_shape", "observation", "timesteps", "action_low", "action_high", "action_std",
-             "source")
+             "source", "decision_period")
 """metadata_props written as ``rayreach.<key>``, each a JSON value."""
 
 
@@ -114,7 +114,7 @@ def export_onnx(policy_or_path: Any, out_path: str | Path, opset: int = DEFAULT_
                   "timesteps": meta.get("timesteps"), "action_low": space.low.tolist(),
                   "action_high": space.high.tolist(),
                   "action_std": torch.exp(sb3.log_std.detach()).numpy().astype(float).tolist(),
-                  "source": str(policy.path)}
+                  "source": str(policy.path), "decision_period": policy.decision_period}
         del model.metadata_props[:]
         onnx.helper.set_model_props(model, {"rayreach.format": str(ONNX_FORMAT),
                                             **{f"rayreach.{k}": json.dumps(v) for k, v in values.items()}})
@@ -165,6 +165,12 @@ class OnnxPolicy:
         from rayreach.env.observation import ObservationConfig
 
         return ObservationConfig(**(self.meta.get("observation") or {}))
+
+    @property
+    def decision_period(self) -> int:
+        """Control steps each action is held for (``rayreach.env.decisions``; 1 where the graph
+        predates the choice)."""
+        return int(self.meta.get("decision_period", 1))
 
     def act(self, obs: np.ndarray, deterministic: bool = True) -> np.ndarray:
         """The deterministic action (6,) for one observation, or (batch, 6) for a batch
