@@ -123,7 +123,6 @@ def test_one_world_decides_the_same_way():
             np.testing.assert_array_equal(obs, o)
             assert reward == pytest.approx(total) and (terminated, truncated) == (t, u)
             if terminated or truncated:
-                assert n <= k
                 break
         else:
             pytest.fail("no episode ended in 200 decisions of random actions")

@@ -33,8 +33,9 @@ def train_command(config: dict, out: str | Path) -> str:
                 command += f" --{'' if observation.get(field) else 'no-'}{flag}"
         if observation.get("privileged"):
             command += " --privileged"
-    if name in RECIPES and config.get("decision_period", 1) != recipe(name, robot=config["robot"]).decision_period:
-        command += f" --decision-period {config.get('decision_period', 1)}"
+    period = config.get("decision_period", 1)  # a run saved before the choice decided every step
+    if name in RECIPES and period != recipe(name, robot=config["robot"]).decision_period:
+        command += f" --decision-period {period}"
     obstacles = config.get("obstacles", {})
     if obstacles and obstacles["minimum"] == obstacles["maximum"] == obstacles["start"]:
         command += f" --obstacles {obstacles['start']}"
