@@ -233,9 +233,9 @@ def build_parser() -> argparse.ArgumentParser:
     cmp_.add_argument("--episodes", type=int, default=200, help="validation worlds each final policy runs")
     cmp_.add_argument("--out", required=True, help="directory of the runs, curves.png and summary.json (resumable)")
     cmp_.add_argument("--variants", default="baseline,default",
-                      help=f"comma-separated, of: {', '.join(COMPARE_VARIANTS)} (a recipe, or the default with "
-                           "one change: the paper's observation, no remembered scans, no workspace walls, an "
-                           "entropy bonus of 0.005)")
+                      help=f"comma-separated, of: {', '.join(COMPARE_VARIANTS)} (a recipe, or the default recipe "
+                           "with one change, e.g. decide-8: a decision every 8 control steps; docs/training.md "
+                           "lists what each changes)")
     cmp_.add_argument("--goal", type=float, default=0.1, help="the task's goal radius, m")
     cmp_.add_argument("--obstacles", type=int, default=1, help="the task's obstacles per world")
     cmp_.add_argument("--jobs", type=int, default=1,
