@@ -203,8 +203,8 @@ def build_parser() -> argparse.ArgumentParser:
                        help="hold the shared feature extractor fixed for this part (fine-tuning after clone)")
     train.add_argument("--goal-size", type=float, default=None, help="fix the goal size, m (no goal curriculum)")
     train.add_argument("--true-goal-share", type=float, default=None,
-                       help="share of episodes at the true goal size while the goal is enlarged (default 0.5; "
-                            "also changes a resumed run)")
+                       help="share of episodes at the true goal size while the goal is enlarged (default: the "
+                            "recipe's, 0.5, the paper's 0; also changes a resumed run)")
 
     sweep = sub.add_parser("sweep", help="train one run per seed (or per value of a setting), each in its own "
                                          "directory, resumable; on Ray with --ray")
