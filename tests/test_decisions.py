@@ -174,3 +174,16 @@ def test_a_policy_of_period_one_decides_every_step():
     actor = ActingPolicy(policy)  # type: ignore[arg-type]
     actor.reset(0)
     assert [actor.act(np.zeros(4), {})[0] for _ in range(4)] == [1, 2, 3, 4]
+
+
+def test_the_learning_curve_counts_decisions_where_a_decision_is_several_steps(tmp_path):
+    import matplotlib.image
+
+    from rayreach.learning.train import plot_curve, steps_label
+
+    assert steps_label(1) == "environment steps"
+    assert steps_label(4) == "decisions (each 4 control steps)"
+    header = "timesteps,goal_size,obstacles,success_rate,collision_rate,out_of_bounds_rate,timeout_rate\n"
+    (tmp_path / "curve.csv").write_text(header + "16384,0.1,1,0.5,0.2,0.1,0.2\n32768,0.09,1,0.6,0.2,0.1,0.1\n")
+    png = plot_curve(tmp_path / "curve.csv", tmp_path / "curve.png", "UR5", steps_label(4))
+    assert matplotlib.image.imread(png).shape[:2] == (660, 880)

@@ -727,7 +727,8 @@ def train(config: TrainConfig, out: str | Path, resume: bool = False, command: s
         meta = bundle_meta(config, state, model.num_timesteps, "model", model.observation_space.shape[0])
         meta["command"] = command
         path = save_bundle(model, out / MODEL, meta, model.get_vec_normalize_env())
-        plot_curve(out / CURVE, out / CURVE_PNG, title=f"{config.robot.upper()} training")
+        plot_curve(out / CURVE, out / CURVE_PNG, title=f"{config.robot.upper()} training",
+                   steps_label=steps_label(config.decision_period))
         return path
     finally:
         venv.close()
@@ -745,7 +746,14 @@ def _has_tensorboard() -> bool:
     return True
 
 
-def plot_curve(csv_path: Path, png_path: Path, title: str) -> Path | None:
+def steps_label(decision_period: int) -> str:
+    """What a curve's step axis counts: a run's ``timesteps`` are its policy's decisions."""
+    if decision_period == 1:
+        return "environment steps"
+    return f"decisions (each {decision_period} control steps)"
+
+
+def plot_curve(csv_path: Path, png_path: Path, title: str, steps_label: str = "environment steps") -> Path | None:
     """The paper's training figure: success rate (and curricula) over environment steps."""
     if not csv_path.exists():
         return None
@@ -772,7 +780,7 @@ def plot_curve(csv_path: Path, png_path: Path, title: str) -> Path | None:
     ax3 = ax2.twinx()
     ax3.step(steps, [float(r["obstacles"]) for r in rows], color="#8c564b", where="post", label="obstacles")
     ax3.set_ylabel("obstacles")
-    return save_curve_figure(fig, ax2, png_path)
+    return save_curve_figure(fig, ax2, png_path, steps_label)
 
 
 def curve_figure():
@@ -786,11 +794,11 @@ def curve_figure():
     return fig, upper, lower
 
 
-def save_curve_figure(fig, lower, png_path: Path) -> Path:
+def save_curve_figure(fig, lower, png_path: Path, steps_label: str = "environment steps") -> Path:
     """Label the shared step axis, write the figure and free it."""
     import matplotlib.pyplot as plt
 
-    lower.set_xlabel("environment steps (millions)")
+    lower.set_xlabel(f"{steps_label} (millions)")
     lower.grid(alpha=0.3)
     fig.tight_layout()
     fig.savefig(png_path, dpi=110)
