@@ -172,7 +172,7 @@ def plot_curves(summary: dict[str, Any], path: Path) -> Path:
         by_samples.plot([s / 1e6 for s in c["timesteps"]], c["success_rate"], color=color, label=label)
     jobs = summary.get("jobs", 1)
     by_time.set_xlabel(f"wall time (min, {summary['cores']} cores" + (f", {jobs} runs at once)" if jobs > 1 else ")"))
-    by_samples.set_xlabel("environment steps (millions)")
+    by_samples.set_xlabel("samples: the policy's decisions (millions)")
     by_time.set_ylabel("training success, last 200 episodes")
     for ax in (by_time, by_samples):
         ax.grid(alpha=0.3)
