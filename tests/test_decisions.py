@@ -185,5 +185,5 @@ def test_the_learning_curve_counts_decisions_where_a_decision_is_several_steps(t
     assert steps_label(4) == "decisions (each 4 control steps)"
     header = "timesteps,goal_size,obstacles,success_rate,collision_rate,out_of_bounds_rate,timeout_rate\n"
     (tmp_path / "curve.csv").write_text(header + "16384,0.1,1,0.5,0.2,0.1,0.2\n32768,0.09,1,0.6,0.2,0.1,0.1\n")
-    png = plot_curve(tmp_path / "curve.csv", tmp_path / "curve.png", "UR5", steps_label(4))
+    png = plot_curve(tmp_path / "curve.csv", tmp_path / "curve.png", "UR5", decision_period=4)
     assert matplotlib.image.imread(png).shape[:2] == (660, 880)

@@ -728,7 +728,7 @@ def train(config: TrainConfig, out: str | Path, resume: bool = False, command: s
         meta["command"] = command
         path = save_bundle(model, out / MODEL, meta, model.get_vec_normalize_env())
         plot_curve(out / CURVE, out / CURVE_PNG, title=f"{config.robot.upper()} training",
-                   steps_label=steps_label(config.decision_period))
+                   decision_period=config.decision_period)
         return path
     finally:
         venv.close()
@@ -753,8 +753,9 @@ def steps_label(decision_period: int) -> str:
     return f"decisions (each {decision_period} control steps)"
 
 
-def plot_curve(csv_path: Path, png_path: Path, title: str, steps_label: str = "environment steps") -> Path | None:
-    """The paper's training figure: success rate (and curricula) over environment steps."""
+def plot_curve(csv_path: Path, png_path: Path, title: str, decision_period: int = 1) -> Path | None:
+    """The paper's training figure: success rate (and curricula) over the run's timesteps, which
+    are decisions of ``decision_period`` control steps each."""
     if not csv_path.exists():
         return None
     from rayreach.env.reach import OUTCOMES
@@ -780,7 +781,7 @@ def plot_curve(csv_path: Path, png_path: Path, title: str, steps_label: str = "e
     ax3 = ax2.twinx()
     ax3.step(steps, [float(r["obstacles"]) for r in rows], color="#8c564b", where="post", label="obstacles")
     ax3.set_ylabel("obstacles")
-    return save_curve_figure(fig, ax2, png_path, steps_label)
+    return save_curve_figure(fig, ax2, png_path, steps_label(decision_period))
 
 
 def curve_figure():
@@ -794,11 +795,11 @@ def curve_figure():
     return fig, upper, lower
 
 
-def save_curve_figure(fig, lower, png_path: Path, steps_label: str = "environment steps") -> Path:
+def save_curve_figure(fig, lower, png_path: Path, steps_axis: str = steps_label(1)) -> Path:
     """Label the shared step axis, write the figure and free it."""
     import matplotlib.pyplot as plt
 
-    lower.set_xlabel(f"{steps_label} (millions)")
+    lower.set_xlabel(f"{steps_axis} (millions)")
     lower.grid(alpha=0.3)
     fig.tight_layout()
     fig.savefig(png_path, dpi=110)
