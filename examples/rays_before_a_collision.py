@@ -1,11 +1,12 @@
 """What the rays saw in the steps before a policy alone hit something, and what the
-tip-back rays would have seen on the same motion.
+rays beyond the paper's would have seen on the same motion.
 
 Runs a policy alone (deterministic) on validation worlds of one obstacle kind and, for every
 episode that ends in a collision, counts over its last ``--window`` steps the rays that saw
-anything: the paper's 129 by sensor (wrist, wraparound, tip), and the 24 tip-back rays
-(``rayreach.sim.sensors.tip_back_layout``) cast along the same motion whether or not the
-policy observes them. A plate just over the goal (``goal_cover``) lies edge-on to the
+anything: the paper's 129 by sensor (wrist, wraparound, tip), and the 24 tip-back and 32
+slanted rays (``rayreach.sim.sensors.EXTRA_RAYS``) cast along the same motion whether or not
+the policy observes them. A policy that decides every few control steps has its action held
+in between, as in training. A plate just over the goal (``goal_cover``) lies edge-on to the
 paper's rays; the plot shows how few of them see it before the tool does.
 
     python examples/rays_before_a_collision.py --model ur5 --kind goal_cover --episodes 10 --out rays.png
@@ -26,7 +27,7 @@ from rayreach.env.reach import ReachEnv  # noqa: E402
 from rayreach.learning.policy import load_policy  # noqa: E402
 from rayreach.planners.drl import resolve_model  # noqa: E402
 from rayreach.scenarios.random_world import KINDS, RandomWorldConfig  # noqa: E402
-from rayreach.sim.sensors import SENSOR_SLICES, RayModel  # noqa: E402
+from rayreach.sim.sensors import EXTRA_RAYS, SENSOR_SLICES, RayModel  # noqa: E402
 
 VALIDATION = 1_000_000
 """The validation split's first seed."""
@@ -37,20 +38,24 @@ def rays_before_collisions(model: str, kind: str, episodes: int, window: int) ->
     policy = load_policy(resolve_model(model))
     env = ReachEnv(robot=policy.robot, scenario="random", goal_tolerance=0.01,
                    random_world=RandomWorldConfig(n_obstacles=1, kinds=(kind,)), observation=policy.observation)
-    tip_back = RayModel.extra(env.spec_robot, env.config.ray_range, tip_back=True)
+    extra = {name: RayModel(env.spec_robot, env.config.ray_range, layout(env.spec_robot))
+             for name, _, layout in EXTRA_RAYS.values()}
     found = []
     try:
         for k in range(episodes):
             obs, _ = env.reset(seed=VALIDATION + k)
             seen: list[dict[str, int]] = []
-            done, info = False, {}
+            done, info, step = False, {}, 0
             while not done:
-                obs, _, terminated, truncated, info = env.step(policy.act(obs[None], deterministic=True)[0])
+                if step % policy.decision_period == 0:  # held in between, as in training
+                    action = policy.act(obs[None], deterministic=True)[0]
+                obs, _, terminated, truncated, info = env.step(action)
+                step += 1
                 done = terminated or truncated
                 fractions = env.perceive().fractions
                 row = {name: int((fractions[block] < 1).sum()) for name, block in SENSOR_SLICES.items()}
-                back = env.caster.cast(*tip_back.world_rays(env.frames), env.config.ray_range)
-                row["tip-back"] = int((back < 1).sum())
+                for name, rays in extra.items():
+                    row[name] = int((env.caster.cast(*rays.world_rays(env.frames), env.config.ray_range) < 1).sum())
                 seen.append(row)
             if info.get("collision"):
                 last = seen[-window:]
@@ -69,9 +74,9 @@ def main() -> None:
     parser.add_argument("--out", required=True, type=Path)
     args = parser.parse_args()
     found = rays_before_collisions(args.model, args.kind, args.episodes, args.window)
-    names = [*SENSOR_SLICES, "tip-back"]
+    names = [*SENSOR_SLICES, *(name for name, _, _ in EXTRA_RAYS.values())]
     fig, ax = plt.subplots(figsize=(7, 4))
-    for name, color in zip(names, ("#7f7f7f", "#1f5fd6", "#2b9a3e", "#d62728")):
+    for name, color in zip(names, ("#7f7f7f", "#1f5fd6", "#2b9a3e", "#d62728", "#9467bd")):
         for counts in found:
             ax.plot(np.arange(-len(counts[name]) + 1, 1), counts[name], color=color, alpha=0.15, lw=0.8)
         full = [c[name] for c in found if len(c[name]) == args.window]

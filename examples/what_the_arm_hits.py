@@ -19,6 +19,7 @@ import matplotlib
 matplotlib.use("Agg")  # headless: the figure only goes to a file
 import matplotlib.pyplot as plt  # noqa: E402
 
+from rayreach.env.decisions import HeldAction  # noqa: E402
 from rayreach.env.reach import ReachEnv  # noqa: E402
 from rayreach.learning.policy import load_policy  # noqa: E402
 from rayreach.planners.drl import resolve_model  # noqa: E402
@@ -35,13 +36,14 @@ def links_hit(model: str, obstacles: int, episodes: int) -> tuple[Counter, int]:
     env = ReachEnv(robot=policy.robot, scenario="random", goal_tolerance=0.01,
                    random_world=RandomWorldConfig(), observation=policy.observation)
     env.set_n_obstacles(obstacles)  # as ``rayreach rollout --obstacles`` sets it
+    stepper = HeldAction(env, policy.decision_period)  # each action held as in training
     hits, collided = Counter(), 0
     try:
         for k in range(episodes):
             obs, _ = env.reset(seed=VALIDATION + k)
             done, info = False, {}
             while not done:
-                obs, _, terminated, truncated, info = env.step(policy.act(obs[None], deterministic=True)[0])
+                obs, _, terminated, truncated, info = stepper.step(policy.act(obs[None], deterministic=True)[0])
                 done = terminated or truncated
             if info.get("collision"):
                 collided += 1
