@@ -168,15 +168,17 @@ def test_controller_refuses_bad_joints_goals_and_order():
         ArmController("ur5", robot="kr16")
 
 
-def test_a_policy_with_tip_back_rays_reads_them_after_the_129(tmp_path):
-    """A policy observing the tip-back rays: fed the 129 and then the 24 from the simulation,
-    the controller builds the observation the env built and commands the same joints; the
-    129 alone are refused with what it takes."""
+@pytest.mark.parametrize("sightings", [0, 3])
+def test_a_policy_with_tip_back_rays_reads_them_after_the_129(tmp_path, sightings):
+    """A policy observing the tip-back rays (and remembering sightings over them and the
+    129): fed the 129 and then the 24 from the simulation, the controller builds the
+    observation the env built and commands the same joints; the 129 alone are refused with
+    what it takes."""
     from rayreach.env.observation import ObservationConfig
     from rayreach.learning.train import TrainConfig, train
 
     config = TrainConfig(robot="ur5", timesteps=64, envs=1, n_steps=64, batch_size=64, n_epochs=1,
-                         observation=ObservationConfig(motion=True, tip_back=True))
+                         observation=ObservationConfig(motion=True, tip_back=True, sightings=sightings))
     policy = load_policy(train(config, tmp_path))
     acting = ActingConfig().without("arm_guard")
     env = ActingEnv(ReachEnv(scenario=plate_over_the_tip(back=0.05, centre_out=0.1, half=0.07),

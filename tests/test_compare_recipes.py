@@ -32,12 +32,14 @@ def test_variants_change_one_thing_of_their_recipe():
 
     assert COMPARE_VARIANTS == tuple(VARIANTS)  # the CLI names them without importing torch
     default = recipe("default", robot="kr16")
-    for name in ("paper-observation", "no-scans", "long-scans", "no-workspace", "entropy", "around-obstacles", "proximity",
+    for name in ("paper-observation", "no-scans", "long-scans", "sightings", "no-workspace", "entropy", "around-obstacles", "proximity",
                  "collision-20", "collision-40", "separate-features", "wide", "decide-1", "decide-2", "decide-8"):
         changed = [f.name for f in fields(default) if getattr(variant(name, "kr16"), f.name) != getattr(default, f.name)]
         assert len(changed) == 1, (name, changed)
     long = variant("long-scans", "ur5").observation  # four scans reaching 96 steps back
     assert (long.scans, long.scans * long.scan_stride) == (4, 96)
+    sight = variant("sightings", "ur5").observation  # twelve windows of eight steps: 0.4 s
+    assert (sight.sightings, sight.sightings * sight.sighting_window, sight.scans) == (12, 96, 3)
     assert variant("no-scans", "ur5").observation.scans == 0 and variant("paper-observation", "ur5").observation.is_paper
     # the tip-back rays are in the UR5's default and out of the KR16's; each variant sets them for both robots
     assert recipe("default", robot="ur5").observation.tip_back and not default.observation.tip_back

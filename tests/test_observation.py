@@ -78,7 +78,7 @@ def test_set_observation_changes_the_space_from_the_next_reset():
         env.close()
 
 
-@pytest.mark.parametrize("bad", [{"scans": -1}, {"scan_stride": 0}])
+@pytest.mark.parametrize("bad", [{"scans": -1}, {"scan_stride": 0}, {"sightings": -1}, {"sighting_window": 0}])
 def test_bad_settings_are_refused(bad):
     with pytest.raises(ValueError, match=next(iter(bad))):
         ObservationConfig(**bad)
@@ -160,5 +160,77 @@ def test_slanted_rays_see_a_thin_plate_across_the_tool_that_the_wraparound_misse
         gap = tool.length / 4 - 0.002
         np.testing.assert_allclose(seen[[1, 16]], gap * math.sqrt(2) / 0.4, atol=1e-4)
         assert seen[8] == seen[9] == 1.0  # azimuth 180 looks away from it
+    finally:
+        env.close()
+
+
+def test_sightings_keep_the_nearest_point_of_each_window_where_it_was_seen():
+    """Two windows of three steps, fed by hand: each holds the nearest point seen in it, as
+    an offset from where the end effector is now over the ray range, until its slot starts
+    a new window; a window that saw nothing reads as four zeros."""
+    from rayreach.env.observation import Observer
+    from rayreach.sim.sensors import RAY_RANGE
+
+    config = ObservationConfig(sightings=2, sighting_window=3)
+    observer = Observer(config, 1, N_RAYS, OBS_SIZE, 0.005)
+    world, base, rays = np.array([0]), np.zeros((1, OBS_SIZE)), np.ones((1, N_RAYS))
+    walls = (np.full((1, 3), -1.0), np.ones((1, 3)))
+    nothing = (np.zeros((1, 3)), np.array([np.inf]))
+
+    def seen(point, reach):
+        return np.array([point], dtype=float), np.array([reach])
+
+    ee = np.array([[0.1, 0.0, 0.0]])
+    observer.reset(world, base, ee, rays, *walls, None, seen([0.3, 0.0, 0.0], 0.2))  # t = 0
+    observer.step(world, base, ee, rays, *walls, None, seen([0.1, 0.1, 0.0], 0.1))   # t = 1, nearer
+    observer.step(world, base, ee, rays, *walls, None, nothing)                      # t = 2
+    part = observer.obs[0, OBS_SIZE:].reshape(2, 4)
+    np.testing.assert_allclose(part[0], [0.0, 0.1 / RAY_RANGE, 0.0, 1.0])  # t = 0..2: the nearer one
+    np.testing.assert_allclose(part[1], 0.0)  # before the episode: nothing
+    moved = np.array([[0.1, 0.0, 0.1]])
+    for _ in range(3):  # t = 3..5 see nothing; the end effector rises 10 cm
+        observer.step(world, base, moved, rays, *walls, None, nothing)
+    part = observer.obs[0, OBS_SIZE:].reshape(2, 4)
+    np.testing.assert_allclose(part[0], 0.0)
+    np.testing.assert_allclose(part[1], [0.0, 0.1 / RAY_RANGE, -0.1 / RAY_RANGE, 1.0])
+    observer.step(world, base, moved, rays, *walls, None, seen([2.0, 0.0, 0.1], 0.05))  # t = 6: far, clipped
+    part = observer.obs[0, OBS_SIZE:].reshape(2, 4)
+    np.testing.assert_allclose(part[0], [1.0, 0.0, 0.0, 1.0])
+    np.testing.assert_allclose(part[1], 0.0)  # the window of t = 0..2 has gone by
+    observer.step(world, base, moved, rays, *walls, None, seen([0.1, 0.0, 0.0], 0.3))  # t = 7: farther along its ray
+    np.testing.assert_allclose(observer.obs[0, OBS_SIZE:OBS_SIZE + 4], [1.0, 0.0, 0.0, 1.0])
+    observer.reset(world, base, moved, rays, *walls, None, nothing)  # a new episode remembers nothing
+    np.testing.assert_allclose(observer.obs[0, OBS_SIZE:], 0.0)
+    with pytest.raises(ValueError, match="sighting"):
+        observer.step(world, base, moved, rays, *walls)
+
+
+def test_the_latest_sighting_is_the_nearest_hit_pybullet_finds_on_every_ray_the_policy_reads():
+    """Over the plate over the tip, the paper's rays and the tip-back ones cast by PyBullet's
+    ``rayTestBatch`` along the env's rays: the latest window's sighting is the hit point of
+    the ray that hits nearest its origin, relative to the tool tip."""
+    import pybullet as p
+
+    from rayreach.sim.scene import OBSTACLE_GROUP
+    from rayreach.sim.sensors import RAY_RANGE, RayModel
+
+    config = replace(ObservationConfig.planner(), sightings=2)
+    env = ReachEnv(scenario=plate_over_the_tip(back=0.05, centre_out=0.1, half=0.07), observation=config)
+    try:
+        obs, _ = env.reset(seed=0)
+        assert obs.shape == env.observation_space.shape
+        assert config.extra_size(N_RAYS) == ObservationConfig.planner().extra_size(N_RAYS) + 8
+        origins, directions = env.rays.world_rays(env.frames)
+        extra = RayModel.extra(env.spec_robot, RAY_RANGE, tip_back=True).world_rays(env.frames)
+        origins, directions = np.concatenate((origins, extra[0])), np.concatenate((directions, extra[1]))
+        hits = p.rayTestBatch(origins.tolist(), (origins + RAY_RANGE * directions).tolist(),
+                              collisionFilterMask=OBSTACLE_GROUP, physicsClientId=env.scene.client)
+        fractions = np.array([1.0 if h[0] < 0 else h[2] for h in hits])
+        assert (fractions < 1).sum() >= 4
+        nearest = [np.array(h[3]) for h, f in zip(hits, fractions) if f < fractions.min() + 1e-5]  # ties: any
+        part = obs[-8:].reshape(2, 4)
+        seen = env.ee_pos + RAY_RANGE * part[0, :3]
+        assert min(np.linalg.norm(seen - point) for point in nearest) < 1e-5
+        assert part[0, 3] == 1.0 and np.all(part[1] == 0.0)
     finally:
         env.close()

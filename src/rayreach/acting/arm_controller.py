@@ -39,7 +39,7 @@ from rayreach.acting.layers import acting_components
 from rayreach.acting.memory import RayMemory
 from rayreach.acting.pipeline import Episode, choose, held_by
 from rayreach.acting.resample import ActingPolicy
-from rayreach.env.observation import OBS_SIZE, ONE_WORLD, Observer, paper_observation
+from rayreach.env.observation import OBS_SIZE, ONE_WORLD, Observer, nearest_sightings, paper_observation
 from rayreach.env.perception import Perception
 from rayreach.env.rewards import RewardWeights
 from rayreach.robots import RobotSpec, get_robot
@@ -108,6 +108,8 @@ class ArmController:
             raise ValueError(f"goal_tolerance must be positive, got {goal_tolerance}")
         self.kin = Kinematics(self.spec, base_position, base_rpy)
         self.rays = RayModel(self.spec, ray_range)
+        observation = self.policy.observation
+        self.extra_rays = RayModel.extra(self.spec, ray_range, observation.tip_back, observation.slanted)
         self.ray_range, self.goal_tolerance, self.ik = float(ray_range), float(goal_tolerance), ik
         self.acting = acting
         if capsules is None and acting.safety.arm_clearance > 0:
@@ -123,6 +125,17 @@ class ArmController:
         self.step_scale = np.array([self.spec.ee_step] * 3 + [self.spec.rot_step] * 3)
         self.seed = seed
         self._goal: np.ndarray | None = None
+
+    def _nearest(self, frames: np.ndarray, origins: np.ndarray, directions: np.ndarray, fractions: np.ndarray,
+                 extra: np.ndarray | None) -> tuple[np.ndarray, np.ndarray] | None:
+        """The nearest sighting over every ray the policy reads, where it remembers sightings."""
+        if not self.policy.observation.sightings:
+            return None
+        if extra is not None and self.extra_rays is not None:
+            extra_origins, extra_directions = self.extra_rays.world_rays(frames)
+            origins, directions = np.concatenate((origins, extra_origins)), np.concatenate((directions, extra_directions))
+            fractions = np.concatenate((fractions, extra[0]))
+        return nearest_sightings(fractions[None], origins[None], directions[None], self.ray_range)
 
     # ------------------------------------------------------------------ a query
     def reset(self, q: np.ndarray, goal: np.ndarray, workspace_low: np.ndarray | None = None,
@@ -167,7 +180,8 @@ class ArmController:
         distance = float(np.linalg.norm(self._goal - ee_pos))
         first = self._episode is None
         base = paper_observation(q, self._goal, ee_pos, ee_rot, self._ref_rot_t, distance, fractions)[None]
-        args = (ONE_WORLD, base, ee_pos[None], fractions[None], self._low[None], self._high[None], extra)
+        nearest = self._nearest(frames, origins, directions, fractions, extra)
+        args = (ONE_WORLD, base, ee_pos[None], fractions[None], self._low[None], self._high[None], extra, nearest)
         if first:
             memory = RayMemory()
             memory.add(now, moved=True)

@@ -42,7 +42,7 @@ from gymnasium.utils import seeding
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices
 
 from rayreach.env.goal_field import FieldBatch, GoalField, scenario_field
-from rayreach.env.observation import Observer
+from rayreach.env.observation import Observer, nearest_sightings
 from rayreach.env.reach import (N_ROBOT_OBS, OBS_SIZE, REWARD_TERM_NAMES, EnvConfig, make_config,
                                 observation_space, resolve_task)
 from rayreach.env.rewards import ShakeCounter
@@ -53,7 +53,7 @@ from rayreach.sim.batch_clearance import PER_SPHERE, SPEED_SCALE, clearance
 from rayreach.sim.batch_collision import CollisionWorlds, candidates
 from rayreach.sim.batch_kinematics import solve_steps
 from rayreach.sim.batch_obstacles import ObstacleBatch
-from rayreach.sim.batch_rays import RayArrays, cast_worlds
+from rayreach.sim.batch_rays import RayArrays, cast_worlds, place_rays
 from rayreach.sim.kinematics import Kinematics
 from rayreach.sim.scene import Scene
 from rayreach.sim.sensors import N_RAYS, RayModel
@@ -389,8 +389,24 @@ class BatchedReachEnv(VecEnv):
     def _observer_args(self, which: np.ndarray) -> tuple:
         """Worlds ``which``'s rows of ``Observer.reset``'s and ``step``'s arguments after ``which``."""
         extra = self.extra_fractions[which] if self.extra_layout is not None else None
+        nearest = self._nearest(which) if self.observer.config.sightings else None
         return (self.base_obs[which], self.ee_pos[which], self.fractions[which], self.ws_low[which],
-                self.ws_high[which], extra)
+                self.ws_high[which], extra, nearest)
+
+    def _nearest(self, which: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Worlds ``which``'s nearest sightings over every ray the policy reads
+        (``rayreach.env.observation.nearest_sightings``), placing only the nearest ray of each."""
+        rows = np.arange(len(which))
+        best = self.fractions[which].argmin(axis=1)
+        fraction = self.fractions[which, best]
+        origins, directions = place_rays(self.layout, self.frames, which, best)
+        if self.extra_layout is not None:
+            extra = self.extra_fractions[which]
+            best_extra = extra.argmin(axis=1)
+            use = extra[rows, best_extra] < fraction
+            origins[use], directions[use] = place_rays(self.extra_layout, self.frames, which[use], best_extra[use])
+            fraction = np.where(use, extra[rows, best_extra], fraction)
+        return nearest_sightings(fraction[:, None], origins[:, None], directions[:, None], self.config.ray_range)
 
     def _observe(self, which: np.ndarray, distance: np.ndarray) -> None:
         """The paper's 142 values of worlds ``which`` into ``base_obs``."""

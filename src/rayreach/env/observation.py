@@ -27,6 +27,11 @@ tip_back             24      fractions of the rays from the tool tip that look b
                              the arm (``rayreach.sim.sensors.tip_back_layout``), now
 slanted              32      fractions of the rays slanted along the tool
                              (``rayreach.sim.sensors.slanted_layout``), now
+sightings x 4        each    the nearest point any ray saw in a window of
+                             ``sighting_window`` steps (k = 0: the window under way):
+                             where it was seen minus where the end effector is now, over
+                             ``RAY_RANGE`` and clipped to [-1, 1], then 1 if anything was seen
+                             (else four zeros)
 privileged           6 per   a teacher's only (``BatchedReachEnv``): for each of the arm's
                      sphere  collision spheres, the nearest obstacle's direction and motion
                              (``rayreach.sim.batch_clearance``)
@@ -40,7 +45,7 @@ from dataclasses import dataclass, replace
 import gymnasium as gym
 import numpy as np
 
-from rayreach.sim.sensors import N_RAYS, extra_sets
+from rayreach.sim.sensors import N_RAYS, RAY_RANGE, extra_sets
 from rayreach.sim.transforms import matrix_to_rpy
 
 N_ROBOT_OBS = 13
@@ -90,6 +95,14 @@ class ObservationConfig:
     slanted: bool = False
     """Rays beside the paper's 129, slanted along the tool, that meet a thin plate lying across
     it (docs/training.md, "Rays slanted along the tool"); read after the tip-back rays."""
+    sightings: int = 0
+    """Windows of remembered sightings (0: none): the nearest point the rays saw in each, where
+    it was seen. A 4 mm plate met edge-on is seen by 1 to 3 rays for a few steps and then by
+    none until the tool hits it (docs/log/2026-12-05-cover-sight.md); a remembered sighting
+    keeps it where it was seen, in the end effector's frame of reference, for
+    ``sightings`` x ``sighting_window`` steps."""
+    sighting_window: int = 8
+    """Steps per window of sightings: 8 steps of at most 5 mm is up to 4 cm of travel."""
     privileged: bool = False
     """What only the simulator knows, after everything else: how near each of the arm's
     collision spheres is to the obstacles and how they move (``rayreach.sim.batch_clearance``).
@@ -101,6 +114,10 @@ class ObservationConfig:
             raise ValueError(f"scans must be >= 0, got {self.scans}")
         if self.scan_stride < 1:
             raise ValueError(f"scan_stride must be >= 1, got {self.scan_stride}")
+        if self.sightings < 0:
+            raise ValueError(f"sightings must be >= 0, got {self.sightings}")
+        if self.sighting_window < 1:
+            raise ValueError(f"sighting_window must be >= 1, got {self.sighting_window}")
 
     @classmethod
     def planner(cls) -> "ObservationConfig":
@@ -120,7 +137,7 @@ class ObservationConfig:
         """Values appended after the paper's, for ``n_rays`` rays (the privileged part, whose
         size depends on the robot, is the env's to add)."""
         return (6 * self.goal_direction + 6 * self.workspace + 3 * self.motion + self.scans * (n_rays + 3)
-                + self.extra_rays)
+                + self.extra_rays + 4 * self.sightings)
 
     @property
     def extra_rays(self) -> int:
@@ -148,6 +165,10 @@ class Observer:
         self.scan_ee = np.zeros((n_worlds, self.length if config.scans else 0, 3))
         self.t = np.zeros(n_worlds, dtype=np.int64)
         self.last_ee = np.zeros((n_worlds, 3))
+        self.sight_point = np.zeros((n_worlds, config.sightings, 3))
+        self.sight_range = np.full((n_worlds, config.sightings), np.inf)
+        """Per window of sightings (a ring), the nearest point seen in it and how far it was from
+        its ray's origin, m; inf: nothing seen."""
 
     def space(self, base: gym.spaces.Box) -> gym.spaces.Box:
         """``base`` (the paper's bounds) with the appended parts' bounds."""
@@ -168,32 +189,40 @@ class Observer:
         if c.extra_rays:
             low.append(np.zeros(c.extra_rays))
             high.append(np.ones(c.extra_rays))
+        if c.sightings:
+            low.append(np.tile([-1.0, -1.0, -1.0, 0.0], c.sightings))
+            high.append(np.ones(4 * c.sightings))
         return gym.spaces.Box(np.concatenate(low).astype(np.float32), np.concatenate(high).astype(np.float32),
                               dtype=np.float32)
 
     def reset(self, which: np.ndarray, base: np.ndarray, ee: np.ndarray, rays: np.ndarray,
-              ws_low: np.ndarray, ws_high: np.ndarray, extra: np.ndarray | None = None) -> None:
+              ws_low: np.ndarray, ws_high: np.ndarray, extra: np.ndarray | None = None,
+              nearest: tuple[np.ndarray, np.ndarray] | None = None) -> None:
         """Worlds ``which`` start an episode: their memory holds only this moment.
-        ``extra``: their fractions of the rays beyond the 129, where the config has them."""
+        ``extra``: their fractions of the rays beyond the 129, where the config has them;
+        ``nearest``: their nearest sighting now (``nearest_sightings``), where it has sightings."""
         self.t[which] = 0
         self.last_ee[which] = ee
         if self.config.scans:
             self.scan_rays[which] = rays[:, None, :]
             self.scan_ee[which] = ee[:, None, :]
-        self._write(which, base, ee, rays, ws_low, ws_high, extra)
+        if self.config.sightings:
+            self.sight_range[which] = np.inf
+        self._write(which, base, ee, rays, ws_low, ws_high, extra, nearest)
 
     def step(self, which: np.ndarray, base: np.ndarray, ee: np.ndarray, rays: np.ndarray,
-             ws_low: np.ndarray, ws_high: np.ndarray, extra: np.ndarray | None = None) -> None:
+             ws_low: np.ndarray, ws_high: np.ndarray, extra: np.ndarray | None = None,
+             nearest: tuple[np.ndarray, np.ndarray] | None = None) -> None:
         """Worlds ``which`` took a step; ``base`` is their paper observation after it."""
         self.t[which] += 1
         if self.config.scans:
             slot = self.t[which] % self.length
             self.scan_rays[which, slot] = rays
             self.scan_ee[which, slot] = ee
-        self._write(which, base, ee, rays, ws_low, ws_high, extra)
+        self._write(which, base, ee, rays, ws_low, ws_high, extra, nearest)
         self.last_ee[which] = ee
 
-    def _write(self, which, base, ee, rays, ws_low, ws_high, extra) -> None:
+    def _write(self, which, base, ee, rays, ws_low, ws_high, extra, nearest) -> None:
         c, out = self.config, self.obs
         out[which, : self.base_size] = base
         k = self.base_size
@@ -221,3 +250,39 @@ class Observer:
                 raise ValueError(f"this observation holds {c.extra_rays} rays beyond the 129 (ObservationConfig."
                                  "tip_back, slanted); pass their fractions")
             out[which, k: k + c.extra_rays] = extra
+            k += c.extra_rays
+        if c.sightings:
+            if nearest is None:
+                raise ValueError(f"this observation remembers {c.sightings} windows of sightings (ObservationConfig."
+                                 "sightings); pass the nearest sighting of each world")
+            out[which, k:] = self._sightings(which, ee, *nearest)
+
+    def _sightings(self, which: np.ndarray, ee: np.ndarray, point: np.ndarray, reach: np.ndarray) -> np.ndarray:
+        """Worlds ``which``'s sightings part, with this step's nearest sighting kept first.
+
+        Windows are blocks of the episode's steps (0 to w - 1, w to 2w - 1, ...), each holding
+        its nearest sighting so far; the latest is the one under way."""
+        c = self.config
+        t = self.t[which]
+        block = (t // c.sighting_window) % c.sightings
+        fresh = t % c.sighting_window == 0  # a block starts: what its slot held has gone by
+        self.sight_range[which[fresh], block[fresh]] = np.inf
+        nearer = reach < self.sight_range[which, block]
+        self.sight_range[which[nearer], block[nearer]] = reach[nearer]
+        self.sight_point[which[nearer], block[nearer]] = point[nearer]
+        order = (t[:, None] // c.sighting_window - np.arange(c.sightings)) % c.sightings  # newest first
+        seen = self.sight_range[which[:, None], order] < np.inf
+        offset = np.clip((self.sight_point[which[:, None], order] - ee[:, None, :]) / RAY_RANGE, -1.0, 1.0)
+        return np.concatenate((offset * seen[:, :, None], seen[:, :, None]), axis=2).reshape(len(which), -1)
+
+
+def nearest_sightings(fractions: np.ndarray, origins: np.ndarray, directions: np.ndarray,
+                      ray_range: float) -> tuple[np.ndarray, np.ndarray]:
+    """Per world, the nearest point its rays see and how far along its ray it lies, m (inf
+    where nothing is seen): ``fractions`` (n, k), ``origins`` and ``directions`` (n, k, 3)."""
+    best = fractions.argmin(axis=1)
+    fraction = np.take_along_axis(fractions, best[:, None], axis=1)[:, 0]
+    reach = fraction * ray_range
+    rows = np.arange(len(best))
+    point = origins[rows, best] + directions[rows, best] * reach[:, None]
+    return point, np.where(fraction < 1.0, reach, np.inf)

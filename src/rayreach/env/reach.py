@@ -65,7 +65,7 @@ import numpy as np
 from rayreach.env import rewards as R
 from rayreach.env.goal_field import GoalField, scenario_field
 from rayreach.env.observation import (N_ROBOT_OBS, OBS_SIZE, ONE_WORLD, ObservationConfig,  # noqa: F401
-                                      Observer, paper_observation)
+                                      Observer, nearest_sightings, paper_observation)
 from rayreach.env.perception import Perception
 from rayreach.robots import ROBOTS, RobotSpec, get_robot
 from rayreach.scenarios import RANDOM, WORLD_SUITES, Scenario, ScenarioError, get_scenario
@@ -406,7 +406,8 @@ class ReachEnv(gym.Env):
         self._ray_fractions = self.caster.cast(self._ray_origins, self._ray_directions, self.config.ray_range)
         self._ray_lengths = self._ray_fractions * self.config.ray_range  # the range where nothing is seen
         if self._extra is not None:
-            self._extra_fractions = self.caster.cast(*self._extra.world_rays(self.frames), self.config.ray_range)
+            self._extra_rays = self._extra.world_rays(self.frames)
+            self._extra_fractions = self.caster.cast(*self._extra_rays, self.config.ray_range)
         return self._ray_fractions
 
     def perceive(self) -> Perception:
@@ -423,9 +424,17 @@ class ReachEnv(gym.Env):
         """This world's row of ``Observer.reset``'s and ``step``'s arguments."""
         scenario = self.scenario
         assert scenario is not None
+        extra = self._extra_fractions[None] if self._extra is not None else None
+        nearest = None
+        if self.observer.config.sightings:  # over every ray the policy reads
+            origins, directions, fractions = self._ray_origins, self._ray_directions, rays
+            if self._extra is not None:
+                origins = np.concatenate((origins, self._extra_rays[0]))
+                directions = np.concatenate((directions, self._extra_rays[1]))
+                fractions = np.concatenate((fractions, self._extra_fractions))
+            nearest = nearest_sightings(fractions[None], origins[None], directions[None], self.config.ray_range)
         return (ONE_WORLD, self._observation(distance, rays)[None], self.ee_pos[None], rays[None],
-                np.asarray(scenario.workspace_low)[None], np.asarray(scenario.workspace_high)[None],
-                self._extra_fractions[None] if self._extra is not None else None)
+                np.asarray(scenario.workspace_low)[None], np.asarray(scenario.workspace_high)[None], extra, nearest)
 
     def _observation(self, distance: float, rays: np.ndarray) -> np.ndarray:
         """The paper's 142 values."""

@@ -41,6 +41,7 @@ VARIANTS: dict[str, tuple[str, dict[str, Any]]] = {
     "paper-observation": ("default", {"observation": ObservationConfig()}),
     "no-scans": ("default", {"observation": replace(ObservationConfig.planner(), scans=0)}),
     "long-scans": ("default", {"observation": replace(ObservationConfig.planner(), scans=4, scan_stride=24)}),
+    "sightings": ("default", {"observation": replace(ObservationConfig.planner(), sightings=12)}),
     "no-workspace": ("default", {"observation": replace(ObservationConfig.planner(), workspace=False)}),
     "entropy": ("default", {"ent_coef": 0.005}),
     "around-obstacles": ("default", {"progress_around_obstacles": True}),

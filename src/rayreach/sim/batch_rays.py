@@ -45,6 +45,16 @@ class RayArrays:
                    np.ascontiguousarray(np.concatenate(directions)))
 
 
+def place_rays(layout: RayArrays, frames: np.ndarray, worlds: np.ndarray, rays: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """World origins and unit directions, each (k, 3), of ray ``rays[j]`` of world ``worlds[j]``
+    with the arm at ``frames[worlds[j]]`` (``RayModel.world_rays`` for a few rays)."""
+    mount = layout.ray_mount[rays]
+    pose = frames[worlds, layout.mount_frame[mount]] @ layout.mount_offset[mount]
+    rot = pose[:, :3, :3]
+    origins = np.einsum("kij,kj->ki", rot, layout.origins[rays]) + pose[:, :3, 3]
+    return origins, np.einsum("kij,kj->ki", rot, layout.directions[rays])
+
+
 def cast_worlds(layout: RayArrays, frames: np.ndarray, obstacles: ObstacleBatch, ray_range: float,
                 which: np.ndarray, fractions: np.ndarray) -> None:
     """Hit fractions (``fractions[i]``, 129 each, 1: nothing within ``ray_range``) of the
