@@ -217,3 +217,18 @@ def test_rays_beyond_the_129_step_as_reach_env_does(slanted, sightings):
     outcomes = _compare("ur5", "random", 6, 12, max_steps=100, goal_tolerance=0.1, observation=observation,
                         random_world=RandomWorldConfig(n_obstacles=1, kinds=("goal_cover", "plate")))
     assert sum(outcomes.values()) >= 12
+
+
+def test_sightings_of_a_plate_many_rays_meet_at_one_distance_step_as_reach_env_does():
+    """A plate square to the tool over its tip: a whole ring of tip-back rays meets it at
+    one distance, and both envs must choose the same of them as the nearest sighting."""
+    from dataclasses import replace
+
+    from rayreach.env.observation import ObservationConfig
+    from scenes import plate_over_the_tip
+
+    observation = replace(ObservationConfig.planner(), sightings=2)
+    for back, out in ((0.05, 0.1), (0.08, 0.12)):
+        outcomes = _compare(None, plate_over_the_tip(back=back, centre_out=out, half=0.07), 2, 2, max_steps=30,
+                            goal_tolerance=0.1, observation=observation)
+        assert sum(outcomes.values()) >= 2

@@ -42,7 +42,7 @@ from gymnasium.utils import seeding
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices
 
 from rayreach.env.goal_field import FieldBatch, GoalField, scenario_field
-from rayreach.env.observation import Observer, nearest_sightings
+from rayreach.env.observation import Observer, nearest_ray, nearest_sightings
 from rayreach.env.reach import (N_ROBOT_OBS, OBS_SIZE, REWARD_TERM_NAMES, EnvConfig, make_config,
                                 observation_space, resolve_task)
 from rayreach.env.rewards import ShakeCounter
@@ -396,16 +396,17 @@ class BatchedReachEnv(VecEnv):
     def _nearest(self, which: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Worlds ``which``'s nearest sightings over every ray the policy reads
         (``rayreach.env.observation.nearest_sightings``), placing only the nearest ray of each."""
-        rows = np.arange(len(which))
-        best = self.fractions[which].argmin(axis=1)
-        fraction = self.fractions[which, best]
-        origins, directions = place_rays(self.layout, self.frames, which, best)
+        fractions = self.fractions[which]
         if self.extra_layout is not None:
-            extra = self.extra_fractions[which]
-            best_extra = extra.argmin(axis=1)
-            use = extra[rows, best_extra] < fraction
-            origins[use], directions[use] = place_rays(self.extra_layout, self.frames, which[use], best_extra[use])
-            fraction = np.where(use, extra[rows, best_extra], fraction)
+            fractions = np.concatenate((fractions, self.extra_fractions[which]), axis=1)
+        best = nearest_ray(fractions)
+        fraction = fractions[np.arange(len(which)), best]
+        origins, directions = np.empty((len(which), 3)), np.empty((len(which), 3))
+        paper = best < N_RAYS
+        origins[paper], directions[paper] = place_rays(self.layout, self.frames, which[paper], best[paper])
+        if self.extra_layout is not None:
+            origins[~paper], directions[~paper] = place_rays(self.extra_layout, self.frames, which[~paper],
+                                                             best[~paper] - N_RAYS)
         return nearest_sightings(fraction[:, None], origins[:, None], directions[:, None], self.config.ray_range)
 
     def _observe(self, which: np.ndarray, distance: np.ndarray) -> None:

@@ -59,6 +59,8 @@ NEAR = 0.05
 WALL_RANGE = 0.3
 """Workspace walls farther than this, m, read as this: the policy sees the walls near it, as
 the rays see obstacles, and a larger user workspace looks like the training one."""
+TIE = 1e-6
+"""Ray fractions this close count as one distance where the nearest sighting is chosen."""
 SCAN_OFFSET_RANGE = 1.0
 """Bound on a remembered scan's end-effector offset, m (for the observation space)."""
 
@@ -99,7 +101,7 @@ class ObservationConfig:
     """Windows of remembered sightings (0: none): the nearest point the rays saw in each, where
     it was seen. A 4 mm plate met edge-on is seen by 1 to 3 rays for a few steps and then by
     none until the tool hits it (docs/log/2026-12-05-cover-sight.md); a remembered sighting
-    keeps it where it was seen, in the end effector's frame of reference, for
+    keeps it where it was seen, relative to the end effector's position (world axes), for
     ``sightings`` x ``sighting_window`` steps."""
     sighting_window: int = 8
     """Steps per window of sightings: 8 steps of at most 5 mm is up to 4 cm of travel."""
@@ -267,7 +269,7 @@ class Observer:
         block = (t // c.sighting_window) % c.sightings
         fresh = t % c.sighting_window == 0  # a block starts: what its slot held has gone by
         self.sight_range[which[fresh], block[fresh]] = np.inf
-        nearer = reach < self.sight_range[which, block]
+        nearer = reach < self.sight_range[which, block] - TIE * RAY_RANGE  # a tie keeps the earlier
         self.sight_range[which[nearer], block[nearer]] = reach[nearer]
         self.sight_point[which[nearer], block[nearer]] = point[nearer]
         order = (t[:, None] // c.sighting_window - np.arange(c.sightings)) % c.sightings  # newest first
@@ -276,11 +278,18 @@ class Observer:
         return np.concatenate((offset * seen[:, :, None], seen[:, :, None]), axis=2).reshape(len(which), -1)
 
 
+def nearest_ray(fractions: np.ndarray) -> np.ndarray:
+    """Per world, the ray whose hit lies nearest its origin: of rays within ``TIE`` of the
+    nearest (a ring meeting a plate square to it), the first, so that casters that round
+    alike to ``TIE`` pick the same ray. ``fractions`` (n, k)."""
+    return (fractions <= fractions.min(axis=1, keepdims=True) + TIE).argmax(axis=1)
+
+
 def nearest_sightings(fractions: np.ndarray, origins: np.ndarray, directions: np.ndarray,
                       ray_range: float) -> tuple[np.ndarray, np.ndarray]:
     """Per world, the nearest point its rays see and how far along its ray it lies, m (inf
     where nothing is seen): ``fractions`` (n, k), ``origins`` and ``directions`` (n, k, 3)."""
-    best = fractions.argmin(axis=1)
+    best = nearest_ray(fractions)
     fraction = np.take_along_axis(fractions, best[:, None], axis=1)[:, 0]
     reach = fraction * ray_range
     rows = np.arange(len(best))
