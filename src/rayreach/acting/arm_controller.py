@@ -39,7 +39,7 @@ from rayreach.acting.layers import acting_components
 from rayreach.acting.memory import RayMemory
 from rayreach.acting.pipeline import Episode, choose, held_by
 from rayreach.acting.resample import ActingPolicy
-from rayreach.env.observation import OBS_SIZE, ONE_WORLD, Observer, nearest_sightings, paper_observation
+from rayreach.env.observation import OBS_SIZE, ONE_WORLD, Observer, one_world_sighting, paper_observation
 from rayreach.env.perception import Perception
 from rayreach.env.rewards import RewardWeights
 from rayreach.robots import RobotSpec, get_robot
@@ -131,11 +131,9 @@ class ArmController:
         """The nearest sighting over every ray the policy reads, where it remembers sightings."""
         if not self.policy.observation.sightings:
             return None
-        if extra is not None and self.extra_rays is not None:
-            extra_origins, extra_directions = self.extra_rays.world_rays(frames)
-            origins, directions = np.concatenate((origins, extra_origins)), np.concatenate((directions, extra_directions))
-            fractions = np.concatenate((fractions, extra[0]))
-        return nearest_sightings(fractions[None], origins[None], directions[None], self.ray_range)
+        beyond = ([(*self.extra_rays.world_rays(frames), extra[0])]
+                  if extra is not None and self.extra_rays is not None else [])
+        return one_world_sighting(self.ray_range, (origins, directions, fractions), *beyond)
 
     # ------------------------------------------------------------------ a query
     def reset(self, q: np.ndarray, goal: np.ndarray, workspace_low: np.ndarray | None = None,

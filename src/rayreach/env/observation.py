@@ -295,3 +295,11 @@ def nearest_sightings(fractions: np.ndarray, origins: np.ndarray, directions: np
     rows = np.arange(len(best))
     point = origins[rows, best] + directions[rows, best] * reach[:, None]
     return point, np.where(fraction < 1.0, reach, np.inf)
+
+
+def one_world_sighting(ray_range: float, *ray_sets: tuple[np.ndarray, np.ndarray, np.ndarray]
+                       ) -> tuple[np.ndarray, np.ndarray]:
+    """One world's ``nearest_sightings`` over the ray sets it reads, each (origins (k, 3),
+    directions (k, 3), fractions (k,)), in observation order: the 129, then those beyond."""
+    origins, directions, fractions = (np.concatenate(parts) for parts in zip(*ray_sets))
+    return nearest_sightings(fractions[None], origins[None], directions[None], ray_range)

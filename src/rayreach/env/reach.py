@@ -65,7 +65,7 @@ import numpy as np
 from rayreach.env import rewards as R
 from rayreach.env.goal_field import GoalField, scenario_field
 from rayreach.env.observation import (N_ROBOT_OBS, OBS_SIZE, ONE_WORLD, ObservationConfig,  # noqa: F401
-                                      Observer, nearest_sightings, paper_observation)
+                                      Observer, one_world_sighting, paper_observation)
 from rayreach.env.perception import Perception
 from rayreach.robots import ROBOTS, RobotSpec, get_robot
 from rayreach.scenarios import RANDOM, WORLD_SUITES, Scenario, ScenarioError, get_scenario
@@ -427,12 +427,9 @@ class ReachEnv(gym.Env):
         extra = self._extra_fractions[None] if self._extra is not None else None
         nearest = None
         if self.observer.config.sightings:  # over every ray the policy reads
-            origins, directions, fractions = self._ray_origins, self._ray_directions, rays
-            if self._extra is not None:
-                origins = np.concatenate((origins, self._extra_rays[0]))
-                directions = np.concatenate((directions, self._extra_rays[1]))
-                fractions = np.concatenate((fractions, self._extra_fractions))
-            nearest = nearest_sightings(fractions[None], origins[None], directions[None], self.config.ray_range)
+            beyond = [(*self._extra_rays, self._extra_fractions)] if self._extra is not None else []
+            nearest = one_world_sighting(self.config.ray_range, (self._ray_origins, self._ray_directions, rays),
+                                         *beyond)
         return (ONE_WORLD, self._observation(distance, rays)[None], self.ee_pos[None], rays[None],
                 np.asarray(scenario.workspace_low)[None], np.asarray(scenario.workspace_high)[None], extra, nearest)
 
