@@ -168,6 +168,8 @@ def test_exported_command_keeps_the_flags_a_resume_keeps():
     no_tip_back = asdict(replace(recipe("default", robot="ur5").observation, tip_back=False))
     assert train_command({**base, "robot": "ur5", "recipe": "default", "observation": no_tip_back}, "RUN").endswith(
         "--checkpoint-every 250000 --no-tip-back [--resume]")
+    covers = {**base, "recipe": "default", "extra_kinds": ["goal_cover", "goal_cover"]}
+    assert train_command(covers, "RUN").endswith("--checkpoint-every 250000 --extra-kinds goal_cover,goal_cover [--resume]")
 
 
 # ---------------------------------------------------------------------- recipes and the batched path
@@ -394,3 +396,19 @@ def test_train_command_line_sets_the_rays_beyond_the_recipes(tmp_path):
     observation = load_policy(out / "model.zip").observation
     assert observation.slanted and observation.tip_back
     assert observation == replace(recipe("default", robot="kr16").observation, slanted=True, tip_back=True)
+
+
+def test_extra_kinds_are_drawn_beside_the_robots_and_survive_a_resume():
+    from rayreach.learning.train import env_config
+    from rayreach.robots import UR5
+
+    config = recipe("default", robot="ur5", extra_kinds=("goal_cover", "goal_cover"))
+    kinds = env_config(config).random_world.kinds
+    assert kinds == UR5.training_kinds + ("goal_cover", "goal_cover")
+    assert kinds.count("goal_cover") == 3 * UR5.training_kinds.count("goal_cover")
+    assert env_config(recipe("default", robot="ur5")).random_world.kinds is None  # the robot's own
+    state = TrainState(AugmentedGoalSize(), ObstacleCurriculum())
+    meta = json.loads(json.dumps(bundle_meta(config, state, 0, "checkpoint", 142)))
+    assert config_from_meta(meta) == config
+    with pytest.raises(ValueError, match="unknown obstacle kind.*lid.*known: plate, moving_plate"):
+        recipe("default", extra_kinds=("lid",))

@@ -17,7 +17,7 @@ TRAIN_RECIPES = ("default", "baseline", "paper")
 COMPARE_VARIANTS = ("baseline", "default", "paper", "paper-observation", "no-scans", "long-scans", "sightings",
                     "no-workspace", "entropy",
                     "around-obstacles", "proximity", "gamma-0.995", "gamma-0.998",
-                    "tip-back", "no-tip-back", "collision-20", "collision-40", "separate-features", "wide",
+                    "tip-back", "no-tip-back", "collision-20", "collision-40", "more-covers", "separate-features", "wide",
                     "decide-1", "decide-2", "decide-8", "slanted", "slanted-no-tip-back")
 """``rayreach.evaluate.compare_recipes.VARIANTS``' names."""
 ROBOT_HELP = " or ".join(ROBOTS)
@@ -176,6 +176,9 @@ def build_parser() -> argparse.ArgumentParser:
                             "straight line (default: the recipe's; also changes a resumed run)")
     train.add_argument("--shield-weight", type=float, default=None,
                        help="weight of the shielded reward term with --acting-layers (also changes a resumed run)")
+    train.add_argument("--extra-kinds", default=None, metavar="KIND[,KIND...]",
+                       help="obstacle kinds drawn beside the robot's training kinds, a kind listed again drawn more "
+                            "often (e.g. goal_cover,goal_cover; '' for none; also changes a resumed run)")
     train.add_argument("--target-kl", type=float, default=None, help="early-stop updates at this KL (0: never)")
     train.add_argument("--separate-features", action="store_true", help="actor and critic get their own extractor")
     train.add_argument("--obstacles", type=int, default=None,
@@ -618,6 +621,8 @@ def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
                  "progress_around_obstacles"):
         if getattr(args, name) is not None:
             overrides[name] = getattr(args, name)
+    if args.extra_kinds is not None:
+        overrides["extra_kinds"] = tuple(k.strip() for k in args.extra_kinds.split(",") if k.strip())
     if args.obstacles is not None:
         overrides["obstacles"] = ObstacleParams(start=args.obstacles, minimum=args.obstacles, maximum=args.obstacles)
     if args.goal_size is not None:

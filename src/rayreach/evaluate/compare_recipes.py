@@ -52,6 +52,7 @@ VARIANTS: dict[str, tuple[str, dict[str, Any]]] = {
     "no-tip-back": ("default", {"observation": replace(ObservationConfig.planner(), tip_back=False)}),
     "collision-20": ("default", {"collision_weight": -20.0}),
     "collision-40": ("default", {"collision_weight": -40.0}),
+    "more-covers": ("default", {"extra_kinds": ("goal_cover", "goal_cover")}),
     "separate-features": ("default", {"share_features": False}),
     "wide": ("default", {"features": (512, 512)}),
     "decide-1": ("default", {"decision_period": 1}),

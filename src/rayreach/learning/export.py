@@ -36,6 +36,8 @@ def train_command(config: dict, out: str | Path) -> str:
     period = config.get("decision_period", 1)  # a run saved before the choice decided every step
     if name in RECIPES and period != recipe(name, robot=config["robot"]).decision_period:
         command += f" --decision-period {period}"
+    if config.get("extra_kinds"):
+        command += f" --extra-kinds {','.join(config['extra_kinds'])}"
     obstacles = config.get("obstacles", {})
     if obstacles and obstacles["minimum"] == obstacles["maximum"] == obstacles["start"]:
         command += f" --obstacles {obstacles['start']}"

@@ -145,6 +145,10 @@ class TrainConfig:
     followed (docs/acting.md, "Training with the layers"). The layers wrap each ``ReachEnv``,
     so the worlds are stepped per environment whatever ``vec_env`` says; each costs about
     56 MB and 0.5 s to build, so give it the baseline's 32."""
+    extra_kinds: tuple[str, ...] = ()
+    """Obstacle kinds drawn beside the robot's ``training_kinds``
+    (``rayreach.scenarios.random_world.KINDS``; not in the paper): a kind listed again is
+    drawn more often in training. The evaluation suites keep the robot's own kinds."""
     observation: ObservationConfig = ObservationConfig.planner()
     """What the policy sees beyond the paper's 142 values (``rayreach.env.observation``; not in
     the paper): the goal's direction, the workspace's walls, its own motion and three ray
@@ -171,6 +175,11 @@ class TrainConfig:
             raise ValueError("a privileged observation (a teacher's) is computed by the batched env only: "
                              "vec_env 'batched' without acting layers")
         check_period(self.decision_period)
+        from rayreach.scenarios.random_world import KINDS
+
+        unknown = [k for k in self.extra_kinds if k not in KINDS]
+        if unknown:
+            raise ValueError(f"unknown obstacle kind(s) in extra_kinds: {', '.join(unknown)}; known: {', '.join(KINDS)}")
         if self.lr_schedule not in LR_SCHEDULES:
             raise ValueError(f"lr_schedule must be one of {', '.join(LR_SCHEDULES)}; "
                              f"got {self.lr_schedule!r}")
@@ -231,6 +240,16 @@ def with_envs(config: TrainConfig, envs: int) -> TrainConfig:
 
 
 # ---------------------------------------------------------------------- model parts
+def training_kinds(config: TrainConfig) -> tuple[str, ...] | None:
+    """The obstacle kinds a run draws its worlds from: the robot's with ``extra_kinds`` added
+    (None, the robot's own, where it adds none)."""
+    if not config.extra_kinds:
+        return None
+    from rayreach.robots import get_robot
+
+    return get_robot(config.robot).training_kinds + config.extra_kinds
+
+
 def env_config(config: TrainConfig):
     """The ``EnvConfig`` of every training world: curriculum start, reward weights, step budget."""
     from rayreach.env.reach import EnvConfig
@@ -244,7 +263,7 @@ def env_config(config: TrainConfig):
         rewards=replace(RewardWeights(), collision=config.collision_weight, progress=config.progress_weight,
                         proximity=config.proximity_weight,
                         shielded=config.shield_weight, progress_around_obstacles=config.progress_around_obstacles),
-        random_world=RandomWorldConfig(n_obstacles=config.obstacles.start),
+        random_world=RandomWorldConfig(n_obstacles=config.obstacles.start, kinds=training_kinds(config)),
         observation=config.observation,
     )
 
@@ -650,6 +669,7 @@ def config_from_meta(meta: dict[str, Any]) -> TrainConfig:
         data["observation"] = ObservationConfig(**data["observation"])
     data["features"] = tuple(data["features"])
     data["heads"] = tuple(data["heads"])
+    data["extra_kinds"] = tuple(data["extra_kinds"])
     return TrainConfig(**data)
 
 
