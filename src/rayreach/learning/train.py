@@ -175,11 +175,10 @@ class TrainConfig:
             raise ValueError("a privileged observation (a teacher's) is computed by the batched env only: "
                              "vec_env 'batched' without acting layers")
         check_period(self.decision_period)
-        from rayreach.scenarios.random_world import KINDS
+        if self.extra_kinds:  # the check imports the world generator, which the recipes at import time need not
+            from rayreach.scenarios.random_world import check_kinds
 
-        unknown = [k for k in self.extra_kinds if k not in KINDS]
-        if unknown:
-            raise ValueError(f"unknown obstacle kind(s) in extra_kinds: {', '.join(unknown)}; known: {', '.join(KINDS)}")
+            check_kinds(self.extra_kinds, " in extra_kinds")
         if self.lr_schedule not in LR_SCHEDULES:
             raise ValueError(f"lr_schedule must be one of {', '.join(LR_SCHEDULES)}; "
                              f"got {self.lr_schedule!r}")

@@ -26,6 +26,14 @@ goal; goal_slot: two parallel upright plates either side of the goal (as in exp2
 listed twice in a robot's ``training_kinds`` is drawn twice as often."""
 
 
+def check_kinds(kinds: Sequence[str], where: str = "") -> None:
+    """Refuses kinds this module does not draw (``KINDS``), naming those it does; ``where``
+    says whose kinds they are."""
+    unknown = [k for k in kinds if k not in KINDS]
+    if unknown:
+        raise ValueError(f"unknown obstacle kind(s) {unknown}{where}; known: {', '.join(KINDS)}")
+
+
 def world_kinds(scenario: Scenario) -> list[str]:
     """The kind (``KINDS``) of each obstacle a random world drew, in drawing order, read from
     the names this module gives its obstacles: a goal slot's two plates and a shelf's boards
@@ -131,9 +139,7 @@ class RandomWorlds:
         self.config = config
         spec = kin.spec
         self.kinds = config.kinds if config.kinds is not None else spec.training_kinds
-        unknown = [k for k in self.kinds if k not in KINDS]
-        if unknown:
-            raise ValueError(f"unknown obstacle kind(s) {unknown}; known: {', '.join(KINDS)}")
+        check_kinds(self.kinds)
         self.low = np.asarray(spec.workspace_low) + config.margin
         self.high = np.asarray(spec.workspace_high) - config.margin
         self.tool_rot = rpy_to_matrix(spec.tool_rpy)
