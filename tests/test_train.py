@@ -252,7 +252,7 @@ def test_callback_reads_only_the_worlds_whose_episode_ended(tmp_path):
     state = TrainState(AugmentedGoalSize(config.goal), ObstacleCurriculum(config.obstacles))
     callback = _make_callback(config, state, tmp_path, total=100)
     callback.init_callback(model)
-    callback.bar, callback.next_checkpoint = tqdm(disable=True), 10**9
+    callback.bar, callback.next_checkpoint, callback.next_validation = tqdm(disable=True), 10**9, 10**9
     terms = dict.fromkeys(REWARD_TERMS, 0.0)
     ended = {"is_success": True, "collision": False, "out_of_bounds": False, "distance": 0.005,
              "goal_tolerance": 0.1, "true_goal_episode": False, "episode_reward_terms": {**terms, "success": 10.0}}

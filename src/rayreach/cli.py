@@ -162,6 +162,11 @@ def build_parser() -> argparse.ArgumentParser:
     train.add_argument("--resume", action="store_true", help="continue the checkpoint in --out")
     train.add_argument("--seed", type=int, default=0)
     train.add_argument("--checkpoint-every", type=int, default=100_000, help="steps between checkpoints")
+    train.add_argument("--validate-every", type=int, default=None, metavar="N",
+                       help="decisions between validations of the checkpoint alone on validation worlds, the best "
+                            "kept as best.zip (default: the recipe's, 2,500,000; 0: never; also changes a resumed run)")
+    train.add_argument("--validate-worlds", type=int, default=None, metavar="N",
+                       help="worlds of each validation (default: 500; also changes a resumed run)")
     train.add_argument("--suite", choices=WORLD_SUITES, default=None,
                        help="the drawn worlds to train in: random (the training box, default) or broad "
                             "(tables, shelves, boxes, clutter, walls up to the arm's reach)")
@@ -590,6 +595,7 @@ def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
 
     from rayreach.learning.curriculum import GoalSizeParams, ObstacleParams
     from rayreach.robots import get_robot
+    from rayreach.learning.bundles import read_bundle_meta
     from rayreach.learning.train import recipe, train, with_envs
 
     robot = get_robot(args.robot).name
@@ -618,7 +624,7 @@ def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
         config = replace(config, observation=replace(config.observation, **rays))
     overrides: dict = {}
     for name in ("collision_weight", "progress_weight", "proximity_weight", "shield_weight",
-                 "progress_around_obstacles"):
+                 "progress_around_obstacles", "validate_every", "validate_worlds"):
         if getattr(args, name) is not None:
             overrides[name] = getattr(args, name)
     if args.extra_kinds is not None:
@@ -640,6 +646,10 @@ def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
     path = train(config, out, resume=args.resume, command=command, resume_overrides=overrides,
                  critic_warmup=args.critic_warmup, freeze_features=args.freeze_features)
     print(f"model: {path}")
+    best = read_bundle_meta(path)[0]["state"].get("best")
+    if best:
+        print(f"best on {best['worlds']} validation worlds: {path.parent / 'best.zip'} "
+              f"({best['timesteps']:,} steps, success {best['success_rate']:.1%}, collisions {best['collision_rate']:.1%})")
     return 0
 
 

@@ -38,6 +38,11 @@ def train_command(config: dict, out: str | Path) -> str:
         command += f" --decision-period {period}"
     if config.get("extra_kinds"):
         command += f" --extra-kinds {','.join(config['extra_kinds'])}"
+    every = config.get("validate_every")  # None: saved before runs validated (the choice changes no weights)
+    if every is not None and name in RECIPES and every != recipe(name, robot=config["robot"]).validate_every:
+        command += f" --validate-every {every}"
+    if every and config["validate_worlds"] != RECIPES["default"].validate_worlds:
+        command += f" --validate-worlds {config['validate_worlds']}"
     obstacles = config.get("obstacles", {})
     if obstacles and obstacles["minimum"] == obstacles["maximum"] == obstacles["start"]:
         command += f" --obstacles {obstacles['start']}"
@@ -45,8 +50,13 @@ def train_command(config: dict, out: str | Path) -> str:
 
 
 def run_bundle(source: str | Path) -> Path:
-    """A bundle file as it is, or a run directory's newer of model.zip and checkpoint.zip."""
+    """A bundle file as it is, or a run directory's choice: the best.zip its validations kept
+    (``rayreach.learning.selection``), else the newer of model.zip and checkpoint.zip."""
+    from rayreach.learning.selection import BEST
+
     source = Path(source)
+    if source.is_dir() and (source / BEST).exists():
+        return source / BEST
     if source.is_dir():
         found = [c for c in (source / "model.zip", source / "checkpoint.zip") if c.exists()]
         if not found:
@@ -71,6 +81,9 @@ def export_bundle(source: str | Path, target: str | Path) -> tuple[Path, Path]:
     info["curriculum"] = {"goal_size": meta["state"]["goal"]["size"], "obstacles": meta["state"]["obstacles"]["count"],
                           "episodes": meta["state"]["episodes"]}
     info["config"] = meta["config"]
+    best = meta["state"].get("best")
+    if best and best["timesteps"] == meta["timesteps"]:  # best.zip: the figures it was chosen on
+        info["validation"] = best
     # demonstrations cloned into the checkpoint (rayreach.learning.demonstrations) leave their reports beside it
     info["demonstrations"] = [json.loads(r.read_text()) for r in sorted(source.parent.glob("clone-*.json"))]
     json_path = target.with_suffix(".json")

@@ -47,6 +47,7 @@ KR16 = RobotSpec(
     workspace_low=(-0.8, -0.4, 0.4),
     workspace_high=(0.8, 0.8, 1.8),
     training_kinds=("shelf", "shelf", "shelf", "plate", "box", "sphere", "goal_wall"),  # the shelf in 3 of 7 draws
+    task_obstacles=1,
     tool_rpy=(math.pi, math.pi / 3.0, -math.pi / 2.0),  # the home pose: tool 30 deg below horizontal, +y
     blind_links=("link_4", "link_5", "link_6"),
 )

@@ -98,6 +98,9 @@ class RobotSpec:
     """Default tool orientation (world roll-pitch-yaw) for random start poses."""
     training_kinds: tuple[str, ...] = ("plate", "moving_plate", "box", "sphere", "goal_cover", "goal_wall", "goal_slot")
     """Obstacle kinds of random training worlds (see ``scenarios.random_world.KINDS``)."""
+    task_obstacles: int = 2
+    """Obstacles per random world of the robot's task: where its policy is measured and
+    where a training run picks its best checkpoint (``rayreach.learning.selection``)."""
     ee_step: float = 0.005
     """Largest end-effector translation per action, m (paper: 0.005 for both robots)."""
     rot_step: float = 0.005
