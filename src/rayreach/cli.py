@@ -301,7 +301,8 @@ def build_parser() -> argparse.ArgumentParser:
     export = sub.add_parser("export", help="copy a run's model (or latest checkpoint) to a shipped file + "
                                            "JSON, or write it as one ONNX graph")
     export_source = export.add_mutually_exclusive_group(required=True)
-    export_source.add_argument("--run", help="run directory or bundle .zip")
+    export_source.add_argument("--run", help="run directory (its best.zip, else the newer of model.zip and "
+                                              "checkpoint.zip) or bundle .zip")
     export_source.add_argument("--model", help="a bundle .zip, or a robot name for its shipped policy "
                                                 "(models/ROBOT.zip)")
     export.add_argument("--to", help="target .zip, e.g. models/ur5.zip")
