@@ -7,16 +7,19 @@ from __future__ import annotations
 import csv
 import json
 import sys
+from pathlib import Path
 from dataclasses import asdict, replace
 
 import pytest
 
 from rayreach.learning import selection
-from rayreach.learning.bundles import read_bundle_meta
+from rayreach.learning.bundles import CheckpointError, read_bundle_meta
 from rayreach.learning.export import export_bundle, run_bundle, train_command
 from rayreach.learning.train import TrainConfig, recipe, train, with_envs
 
 from test_train import _stand_in_batched_module
+
+SHIPPED_UR5 = Path(__file__).parents[1] / "models" / "ur5.zip"
 
 
 def _small(**changes) -> TrainConfig:
@@ -25,14 +28,16 @@ def _small(**changes) -> TrainConfig:
     return replace(with_envs(TrainConfig(), 4), **{**settings, **changes})
 
 
-def _scripted(scores: dict[int, float], seen: list):
-    """A stand-in for ``selection.validate`` whose score at each step count is given; it reads
-    the step count from the checkpoint, so a verdict belongs to the file it judged."""
+def _scripted(scores: dict[int, float | BaseException], seen: list):
+    """A stand-in for ``selection.validate`` whose score (or exception) at each step count is
+    given; it reads the step count from the checkpoint, so a verdict belongs to the file it judged."""
     def validate(checkpoint, robot, suite, worlds):
         steps = read_bundle_meta(checkpoint)[0]["timesteps"]
         seen.append((steps, robot, suite, worlds))
+        if isinstance(scores[steps], BaseException):
+            raise scores[steps]
         return {"success_rate": scores[steps], "collision_rate": 0.0, "out_of_bounds_rate": 0.0,
-                "timeout_rate": 1.0 - scores[steps], "score": scores[steps], "worlds": worlds}
+                "timeout_rate": 1.0 - scores[steps], "score": scores[steps], "worlds": worlds, "obstacles": 2}
     return validate
 
 
@@ -64,6 +69,48 @@ def test_the_best_checkpoint_is_kept_and_survives_a_resume(tmp_path, monkeypatch
     assert shipped["timesteps"] == 512 and shipped["validation"]["score"] == 0.5
 
 
+def test_an_interrupted_validation_is_made_on_resume_and_a_failed_one_is_skipped(tmp_path, monkeypatch):
+    monkeypatch.setitem(sys.modules, "rayreach.env.batched", _stand_in_batched_module())
+    seen: list = []
+    scores = {256: 0.3, 512: KeyboardInterrupt(), 768: RuntimeError("no feasible world"), 1024: 0.1}
+    monkeypatch.setattr(selection, "validate", _scripted(scores, seen))
+    out = tmp_path / "run"
+    with pytest.raises(KeyboardInterrupt):
+        train(_small(timesteps=1024), out)
+    assert read_bundle_meta(out / "checkpoint.zip")[0]["state"]["validated_at"] == 256
+    scores[516] = 0.6
+    train(_small(timesteps=1024), out, resume=True)
+    # made again after the resumed part's first step (4 worlds); 768 failed and the run went on
+    assert [s[0] for s in seen] == [256, 512, 516, 768, 1024]
+    rows = selection.read_validation(out)
+    assert [r["timesteps"] for r in rows] == [256, 516, 1024]
+    assert read_bundle_meta(out / selection.BEST)[0]["timesteps"] == 516
+
+    train(_small(timesteps=1100), out, resume=True, resume_overrides={"validate_every": 0})
+    assert len(seen) == 5  # "never" holds for the last checkpoint too
+    with pytest.raises(CheckpointError, match="best.zip is left from an earlier run"):
+        (out / "checkpoint.zip").unlink()
+        train(_small(timesteps=1100), out)
+
+
+def test_validation_leaves_the_runs_random_generators_and_threads_alone(monkeypatch):
+    import random
+
+    import numpy as np
+    import torch
+
+    torch.set_num_threads(2)
+    random.seed(5), np.random.seed(5), torch.manual_seed(5)
+    expected = random.random(), np.random.rand(), torch.rand(1).item()
+    random.seed(5), np.random.seed(5), torch.manual_seed(5)
+    row = selection.validate(SHIPPED_UR5, "ur5", "random", 2)  # loads the policy: SB3 reseeds and sets 1 thread
+    assert (random.random(), np.random.rand(), torch.rand(1).item()) == expected
+    assert torch.get_num_threads() == 2
+    assert row["worlds"] == 2 and row["obstacles"] == 2
+    assert sum(row[f"{o}_rate"] for o in ("success", "collision", "out_of_bounds", "timeout")) == pytest.approx(1)
+    assert row["score"] == pytest.approx(row["success_rate"] - row["collision_rate"])
+
+
 def test_a_run_shorter_than_one_interval_chooses_nothing(tmp_path, monkeypatch):
     monkeypatch.setitem(sys.modules, "rayreach.env.batched", _stand_in_batched_module())
     seen: list = []
@@ -73,25 +120,16 @@ def test_a_run_shorter_than_one_interval_chooses_nothing(tmp_path, monkeypatch):
     assert run_bundle(tmp_path / "run") == tmp_path / "run" / "model.zip"
 
 
-def test_validation_plays_the_checkpoint_alone_on_the_task_worlds(tmp_path, monkeypatch):
+def test_validation_plays_the_checkpoint_alone_on_the_robots_task(monkeypatch):
     from rayreach.evaluate import rollout
-    from rayreach.robots import KR16
 
     calls = []
-    monkeypatch.setattr(rollout, "rollout_batched", lambda model, **kw: calls.append(kw) or types_summary())
-    row = selection.validate(tmp_path / "checkpoint.zip", "kr16", "random", 4)
-    assert calls == [{"episodes": 4, "goal_tolerance": 0.01, "n_obstacles": KR16.task_obstacles,
-                      "seed": selection.SELECTION_SEED, "split": "validation", "suite": "random"}]
-    assert row == {"success_rate": 0.5, "collision_rate": 0.25, "out_of_bounds_rate": 0.0, "timeout_rate": 0.25,
-                   "score": 0.25, "worlds": 4}
-
-
-def types_summary():
-    from rayreach.evaluate.rollout import RolloutSummary
-
-    return RolloutSummary(episodes=4, success_rate=0.5, collision_rate=0.25, path_length_mean=0.5, steps_mean=10,
-                          successes=2, collisions=1, deterministic=True, acting_layers=[], acting_share={}, safety={},
-                          outcomes={"success": 2, "collision": 1, "out_of_bounds": 0, "timeout": 1})
+    real = rollout.rollout_batched
+    monkeypatch.setattr(rollout, "rollout_batched", lambda model, **kw: calls.append(kw) or real(model, **kw))
+    selection.validate(SHIPPED_UR5, "ur5", "broad", 1)
+    assert calls == [{"episodes": 1, "goal_tolerance": 0.01, "n_obstacles": selection.BROAD_ELEMENTS,
+                      "seed": selection.SELECTION_SEED, "split": "validation", "suite": "broad"}]
+    assert (selection.task_obstacles("ur5", "random"), selection.task_obstacles("kr16", "random")) == (2, 1)
 
 
 def test_validation_settings_are_checked_and_exported():

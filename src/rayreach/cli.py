@@ -164,9 +164,10 @@ def build_parser() -> argparse.ArgumentParser:
     train.add_argument("--checkpoint-every", type=int, default=100_000, help="steps between checkpoints")
     train.add_argument("--validate-every", type=int, default=None, metavar="N",
                        help="decisions between validations of the checkpoint alone on validation worlds, the best "
-                            "kept as best.zip (default: the recipe's, 2,500,000; 0: never; also changes a resumed run)")
+                            "kept as best.zip (default: the recipe's, 2,500,000; 0: never; a resumed run keeps its "
+                            "own, 0 for a run saved before runs validated, unless given)")
     train.add_argument("--validate-worlds", type=int, default=None, metavar="N",
-                       help="worlds of each validation (default: 500; also changes a resumed run)")
+                       help="worlds of each validation (default: 500; given to a resumed run, its choice starts afresh)")
     train.add_argument("--suite", choices=WORLD_SUITES, default=None,
                        help="the drawn worlds to train in: random (the training box, default) or broad "
                             "(tables, shelves, boxes, clutter, walls up to the arm's reach)")
@@ -597,6 +598,7 @@ def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
     from rayreach.learning.curriculum import GoalSizeParams, ObstacleParams
     from rayreach.robots import get_robot
     from rayreach.learning.bundles import read_bundle_meta
+    from rayreach.learning.selection import BEST
     from rayreach.learning.train import recipe, train, with_envs
 
     robot = get_robot(args.robot).name
@@ -649,7 +651,7 @@ def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
     print(f"model: {path}")
     best = read_bundle_meta(path)[0]["state"].get("best")
     if best:
-        print(f"best on {best['worlds']} validation worlds: {path.parent / 'best.zip'} "
+        print(f"best on {best['worlds']} validation worlds: {path.parent / BEST} "
               f"({best['timesteps']:,} steps, success {best['success_rate']:.1%}, collisions {best['collision_rate']:.1%})")
     return 0
 

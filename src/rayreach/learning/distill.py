@@ -141,6 +141,7 @@ def distill(teacher_path: str | Path, out: str | Path, config: DistillConfig = D
     env = BatchedReachEnv(teacher_config.robot, config.envs, scenario=teacher_config.suite,
                           config=env_config(teacher_config), seed=config.seed * 7_919 + done)
     state = TrainState.from_dict(meta["state"])
+    state.best, state.validated_at = None, 0  # the student's own run chooses among its own checkpoints
     env.set_goal_tolerance(state.goal.size)
     env.set_n_obstacles(state.obstacles.count)
     size = env.observer.size

@@ -26,20 +26,20 @@ def train_command(config: dict, out: str | Path) -> str:
     from rayreach.learning.train import RECIPES, recipe
     from rayreach.sim.sensors import EXTRA_RAYS
 
-    if isinstance(observation, dict) and name in RECIPES:
-        usual = recipe(name, robot=config["robot"]).observation
+    usual = recipe(name, robot=config["robot"]) if name in RECIPES else None
+    if isinstance(observation, dict) and usual is not None:
         for field, (flag, _, _) in EXTRA_RAYS.items():
-            if observation.get(field, False) != getattr(usual, field):
+            if observation.get(field, False) != getattr(usual.observation, field):
                 command += f" --{'' if observation.get(field) else 'no-'}{flag}"
         if observation.get("privileged"):
             command += " --privileged"
     period = config.get("decision_period", 1)  # a run saved before the choice decided every step
-    if name in RECIPES and period != recipe(name, robot=config["robot"]).decision_period:
+    if usual is not None and period != usual.decision_period:
         command += f" --decision-period {period}"
     if config.get("extra_kinds"):
         command += f" --extra-kinds {','.join(config['extra_kinds'])}"
-    every = config.get("validate_every")  # None: saved before runs validated (the choice changes no weights)
-    if every is not None and name in RECIPES and every != recipe(name, robot=config["robot"]).validate_every:
+    every = config.get("validate_every")  # None: saved before runs validated (validating changes no weights)
+    if every is not None and usual is not None and every != usual.validate_every:
         command += f" --validate-every {every}"
     if every and config["validate_worlds"] != RECIPES["default"].validate_worlds:
         command += f" --validate-worlds {config['validate_worlds']}"

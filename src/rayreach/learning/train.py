@@ -25,6 +25,7 @@ import numpy as np
 
 from rayreach.learning.curriculum import AugmentedGoalSize, GoalSizeParams, ObstacleCurriculum, ObstacleParams
 from rayreach.learning.bundles import CheckpointError, read_bundle_meta, restore_normalization, save_bundle
+from rayreach.learning import selection
 from rayreach.env.decisions import check_period
 from rayreach.env.observation import ObservationConfig
 from rayreach.env.rewards import RewardWeights
@@ -164,9 +165,10 @@ class TrainConfig:
     validate_every: int = 2_500_000
     """Decisions between validations of the checkpoint alone on ``validate_worlds`` validation
     worlds, the best kept as best.zip (``rayreach.learning.selection``; not in the paper); 0:
-    never. A run shorter than one interval chooses nothing."""
+    never. A run shorter than one interval chooses nothing; one that validated judges its
+    last checkpoint too. A run saved before runs validated resumes with 0."""
     validate_worlds: int = 500
-    """Worlds of each validation: 500 take about 10 s, 4 % of a default run in 16 of them."""
+    """Worlds of each validation (a resumed part that changes it starts its choice afresh)."""
     goal: GoalSizeParams = field(default_factory=GoalSizeParams)
     obstacles: ObstacleParams = field(default_factory=ObstacleParams)
     device: str = "cpu"
@@ -539,7 +541,7 @@ def _make_callback(config: TrainConfig, state: TrainState, out: Path, total: int
         def _on_training_start(self) -> None:
             self.next_checkpoint = (self.num_timesteps // config.checkpoint_every + 1) * config.checkpoint_every
             if config.validate_every:
-                self.next_validation = (self.num_timesteps // config.validate_every + 1) * config.validate_every
+                self.next_validation = (state.validated_at // config.validate_every + 1) * config.validate_every
             self.bar = tqdm(total=total, initial=self.num_timesteps, unit="step", dynamic_ncols=True,
                             desc=f"train {config.robot}", smoothing=0.05)
             self.t_start = time.time()
@@ -570,7 +572,7 @@ def _make_callback(config: TrainConfig, state: TrainState, out: Path, total: int
                 self.next_checkpoint += config.checkpoint_every
             if config.validate_every and self.num_timesteps >= self.next_validation:
                 self.validate()
-                self.next_validation += config.validate_every
+                self.next_validation = (self.num_timesteps // config.validate_every + 1) * config.validate_every
             return True
 
         def _episodes_ended(self, infos: list[dict[str, Any]]) -> None:
@@ -633,14 +635,18 @@ def _make_callback(config: TrainConfig, state: TrainState, out: Path, total: int
 
         def validate(self) -> None:
             """Play the checkpoint of now on the selection worlds; keep it as best.zip if it
-            scores best so far. The checkpoint is saved again so that it holds the verdict."""
-            from rayreach.learning import selection
-
+            scores best so far. The checkpoint is saved again so that it holds the verdict. A
+            validation that fails is reported and skipped: it must not end hours of training."""
             self.save_checkpoint()
-            row = {"timesteps": self.num_timesteps, "wall_time": round(self.wall_time(), 1),
-                   **selection.validate(out / CHECKPOINT, config.robot, config.suite, config.validate_worlds)}
+            try:
+                verdict = selection.validate(out / CHECKPOINT, config.robot, config.suite, config.validate_worlds)
+            except Exception as exc:  # noqa: BLE001 - any failure of the judge, reported
+                self.bar.write(f"validation at {self.num_timesteps:,} failed, skipped: {exc!r}")
+                return
+            row = {"timesteps": self.num_timesteps, "wall_time": round(self.wall_time(), 1), **verdict}
+            append_curve(out / selection.VALIDATION_CSV, row)
             state.validated_at = self.num_timesteps
-            better = selection.record(out, row, state.best)
+            better = selection.beats(row, state.best)
             if better:
                 state.best = row
             self.save_checkpoint()
@@ -755,9 +761,14 @@ def train(config: TrainConfig, out: str | Path, resume: bool = False, command: s
             state.learning_rate = None
         if "obstacles" in (resume_overrides or {}):  # a new obstacle rule starts its own count
             state.obstacles = ObstacleCurriculum(config.obstacles)
+        if config.validate_worlds != saved.validate_worlds:  # scores of other worlds do not compare
+            state.best = None
     else:
         if checkpoint.exists():
             raise CheckpointError(f"{checkpoint} exists: pass --resume to continue it, or choose another --out")
+        if (out / selection.BEST).exists():
+            raise CheckpointError(f"{out / selection.BEST} is left from an earlier run: move it away, or choose "
+                                  f"another --out")
         state = TrainState(AugmentedGoalSize(config.goal), ObstacleCurriculum(config.obstacles))
         norm = None
 
@@ -782,14 +793,14 @@ def train(config: TrainConfig, out: str | Path, resume: bool = False, command: s
             try:
                 model.learn(remaining, callback=[callback, *callbacks], reset_num_timesteps=False,
                             tb_log_name="ppo", progress_bar=False)
+                if config.validate_every and state.best is not None and state.validated_at < model.num_timesteps:
+                    callback.validate()  # the last checkpoint is a candidate too
             except KeyboardInterrupt:
                 interrupted = True
             finally:
                 signal.signal(signal.SIGTERM, previous)
                 torch.set_num_threads(threads)  # the callback set them per phase; a next run counts on them
             callback.save_checkpoint()  # the callback is bound to the model only once learn() ran
-            if not interrupted and state.best is not None and state.validated_at < model.num_timesteps:
-                callback.validate()  # the last checkpoint is a candidate too
         if interrupted:
             raise KeyboardInterrupt(f"interrupted at {model.num_timesteps} steps; resume with --resume")
         meta = bundle_meta(config, state, model.num_timesteps, "model", model.observation_space.shape[0])
@@ -839,9 +850,7 @@ def plot_curve(csv_path: Path, png_path: Path, title: str, decision_period: int 
     true_success = [float(r.get("true_success_rate") or "nan") for r in rows]
     if not np.all(np.isnan(true_success)):
         ax1.plot(steps, true_success, color="#2b9a3e", linestyle="--", label="success at the true goal size")
-    from rayreach.learning.selection import read_validation
-
-    validation = read_validation(csv_path.parent)
+    validation = selection.read_validation(csv_path.parent)
     if validation:
         at = np.array([r["timesteps"] for r in validation]) / 1e6
         ax1.plot(at, [r["success_rate"] for r in validation], "o", color="#2b9a3e", markerfacecolor="none",
