@@ -853,16 +853,17 @@ def plot_curve(csv_path: Path, png_path: Path, title: str, decision_period: int 
     validation = selection.read_validation(csv_path.parent)
     if validation:
         at = np.array([r["timesteps"] for r in validation]) / 1e6
-        ax1.plot(at, [r["success_rate"] for r in validation], "o", color="#2b9a3e", markerfacecolor="none",
-                 label=f"success alone, {int(validation[0]['worlds'])} validation worlds")
-        ax1.plot(at, [r["collision_rate"] for r in validation], "o", color="#d62728", markerfacecolor="none",
-                 label="collisions alone, the same worlds")
+        ax1.plot(at, [r["success_rate"] for r in validation], "o", color="#2b9a3e", markeredgecolor="black",
+                 zorder=5, label=f"success alone, {int(validation[0]['worlds'])} validation worlds")
+        ax1.plot(at, [r["collision_rate"] for r in validation], "o", color="#d62728", markeredgecolor="black",
+                 zorder=5, label="collisions alone, the same worlds")
         best = max(validation, key=lambda r: r["score"])
-        ax1.plot([best["timesteps"] / 1e6], [best["success_rate"]], "*", color="black", markersize=12,
-                 label="the checkpoint kept (best.zip)")
-    ax1.set_ylabel("share of last 200 episodes")
-    ax1.set_ylim(-0.02, 1.02)
-    ax1.legend(loc="center right", fontsize=8)
+        ax1.plot([best["timesteps"] / 1e6], [best["success_rate"]], "*", color="gold", markeredgecolor="black",
+                 markersize=16, zorder=6, label="the checkpoint kept (best.zip)")
+    ax1.set_ylabel("share of episodes or worlds")
+    ax1.set_ylim(-0.02, 1.25)  # room above for the legend
+    ax1.set_yticks(np.linspace(0.0, 1.0, 6))
+    ax1.legend(loc="upper center", fontsize=7, ncol=3)
     ax1.set_title(title)
     ax1.grid(alpha=0.3)
     ax2.plot(steps, [float(r["goal_size"]) for r in rows], color="#1f5fd6", label="goal size (m)")
