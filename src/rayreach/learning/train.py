@@ -509,6 +509,11 @@ def set_learning_rate(model, lr: float) -> None:
     model._setup_lr_schedule()
 
 
+def next_multiple(steps: int, every: int) -> int:
+    """The first multiple of ``every`` past ``steps``: when a periodic task next falls due."""
+    return (steps // every + 1) * every
+
+
 def _make_callback(config: TrainConfig, state: TrainState, out: Path, total: int, critic_warmup: int = 0,
                    freeze_features: bool = False):
     import torch
@@ -539,9 +544,9 @@ def _make_callback(config: TrainConfig, state: TrainState, out: Path, total: int
             torch.set_num_threads(1)  # intra-op threads spin and starve the env workers
 
         def _on_training_start(self) -> None:
-            self.next_checkpoint = (self.num_timesteps // config.checkpoint_every + 1) * config.checkpoint_every
-            if config.validate_every:
-                self.next_validation = (state.validated_at // config.validate_every + 1) * config.validate_every
+            self.next_checkpoint = next_multiple(self.num_timesteps, config.checkpoint_every)
+            if config.validate_every:  # from the last validation: one cut short is made at once
+                self.next_validation = next_multiple(state.validated_at, config.validate_every)
             self.bar = tqdm(total=total, initial=self.num_timesteps, unit="step", dynamic_ncols=True,
                             desc=f"train {config.robot}", smoothing=0.05)
             self.t_start = time.time()
@@ -572,7 +577,7 @@ def _make_callback(config: TrainConfig, state: TrainState, out: Path, total: int
                 self.next_checkpoint += config.checkpoint_every
             if config.validate_every and self.num_timesteps >= self.next_validation:
                 self.validate()
-                self.next_validation = (self.num_timesteps // config.validate_every + 1) * config.validate_every
+                self.next_validation = next_multiple(self.num_timesteps, config.validate_every)
             return True
 
         def _episodes_ended(self, infos: list[dict[str, Any]]) -> None:
