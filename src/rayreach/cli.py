@@ -168,6 +168,12 @@ def build_parser() -> argparse.ArgumentParser:
                             "own, 0 for a run saved before runs validated, unless given)")
     train.add_argument("--validate-worlds", type=int, default=None, metavar="N",
                        help="worlds of each validation (default: 500; given to a resumed run, its choice starts afresh)")
+    train.add_argument("--starts", type=int, default=None, metavar="N",
+                       help="seeds started side by side (--seed, --seed + 1, ...) on a share of the cores each; the "
+                            "best alone on the validation worlds after --start-decisions continues (default: the "
+                            "recipe's, 2 for the KR16, else 1)")
+    train.add_argument("--start-decisions", type=int, default=None, metavar="N",
+                       help="decisions of each start before the choice (default: 5,000,000)")
     train.add_argument("--suite", choices=WORLD_SUITES, default=None,
                        help="the drawn worlds to train in: random (the training box, default) or broad "
                             "(tables, shelves, boxes, clutter, walls up to the arm's reach)")
@@ -599,7 +605,8 @@ def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
     from rayreach.robots import get_robot
     from rayreach.learning.bundles import read_bundle_meta
     from rayreach.learning.selection import BEST
-    from rayreach.learning.train import recipe, train, with_envs
+    from rayreach.learning.starts import train_with_starts
+    from rayreach.learning.train import recipe, with_envs
 
     robot = get_robot(args.robot).name
     config = recipe(args.recipe, robot=robot, seed=args.seed, checkpoint_every=args.checkpoint_every)
@@ -616,6 +623,10 @@ def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
         config = replace(config, share_features=False)
     if args.suite is not None:
         config = replace(config, suite=args.suite)
+    if args.starts is not None:
+        config = replace(config, starts=args.starts)
+    if args.start_decisions is not None:
+        config = replace(config, start_decisions=args.start_decisions)
     if args.decision_period is not None:
         config = replace(config, decision_period=args.decision_period)
     from rayreach.sim.sensors import EXTRA_RAYS
@@ -646,8 +657,8 @@ def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
         overrides["learning_rate"] = args.learning_rate
     config = replace(config, **overrides)
     command = _command_line(argv)
-    path = train(config, out, resume=args.resume, command=command, resume_overrides=overrides,
-                 critic_warmup=args.critic_warmup, freeze_features=args.freeze_features)
+    path = train_with_starts(config, out, resume=args.resume, command=command, resume_overrides=overrides,
+                             critic_warmup=args.critic_warmup, freeze_features=args.freeze_features)
     print(f"model: {path}")
     best = read_bundle_meta(path)[0]["state"].get("best")
     if best:

@@ -75,7 +75,7 @@ class PhaseTimer(BaseCallback):
 def time_recipe(config: TrainConfig, seconds: float) -> dict[str, Any]:
     """Train ``config`` for about ``seconds`` after the warm-up; the timer's figures."""
     timer = PhaseTimer(seconds)
-    config = replace(config, timesteps=10**12, checkpoint_every=10**12, validate_every=0)  # the timer ends it
+    config = replace(config, timesteps=10**12, checkpoint_every=10**12, validate_every=0, starts=1)  # the timer ends it
     with tempfile.TemporaryDirectory(prefix="rayreach-bench-train-") as out:
         train(config, Path(out) / "run", callbacks=[timer])
     return timer.result()

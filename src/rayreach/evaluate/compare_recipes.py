@@ -75,7 +75,7 @@ def variant(name: str, robot: str) -> TrainConfig:
 def fixed_task(config: TrainConfig, goal: float = GOAL, obstacles: int = OBSTACLES) -> TrainConfig:
     """``config`` on the fixed task: the goal-size and obstacle curricula held at their values,
     no validations (each variant's wall time goes to training)."""
-    return replace(config, timesteps=10**12, true_goal_share=0.0, validate_every=0,
+    return replace(config, timesteps=10**12, true_goal_share=0.0, validate_every=0, starts=1,
                    goal=GoalSizeParams(rho=goal, rho_max=goal, rho_min=goal),
                    obstacles=ObstacleParams(start=obstacles, minimum=obstacles, maximum=obstacles))
 

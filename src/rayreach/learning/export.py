@@ -43,6 +43,8 @@ def train_command(config: dict, out: str | Path) -> str:
         command += f" --validate-every {every}"
     if every and config["validate_worlds"] != RECIPES["default"].validate_worlds:
         command += f" --validate-worlds {config['validate_worlds']}"
+    if usual is not None and config.get("starts", 1) != usual.starts:
+        command += f" --starts {config.get('starts', 1)}"
     obstacles = config.get("obstacles", {})
     if obstacles and obstacles["minimum"] == obstacles["maximum"] == obstacles["start"]:
         command += f" --obstacles {obstacles['start']}"

@@ -99,7 +99,7 @@ def plan_trials(base: TrainConfig, out: str | Path, seeds: Sequence[int] = (0,),
     trials = []
     for value in (setting[1] if setting else (None,)):
         for seed in seeds:
-            config = replace(base, seed=seed)
+            config = replace(base, seed=seed, starts=1)  # a sweep is its own set of seeds
             name = f"seed-{seed}"
             if setting:
                 config = _with(config, setting[0], value)
