@@ -97,6 +97,24 @@ def save_bundle(model: Any, path: str | Path, meta: dict[str, Any], vecnorm: Any
     return path
 
 
+def copy_bundle(source: str | Path, path: str | Path, meta: dict[str, Any]) -> Path:
+    """Copy a bundle with new metadata, atomically as ``save_bundle`` writes one."""
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".", suffix=".part.zip")
+    os.close(fd)
+    try:
+        with zipfile.ZipFile(source) as old, zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as new:
+            for item in old.infolist():
+                if item.filename != META_ENTRY:
+                    new.writestr(item, old.read(item.filename))
+            new.writestr(META_ENTRY, json.dumps({"format": FORMAT, **meta}, indent=2, default=_json_default))
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+    return path
+
+
 def _json_default(value: Any) -> Any:
     if isinstance(value, (np.integer, np.floating)):
         return value.item()
