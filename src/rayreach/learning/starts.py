@@ -8,9 +8,9 @@ worlds showed it by 5 M decisions (51 % against 89 to 92 %, docs/training.md). S
 ``workers // starts`` cores, in ``OUT/starts/seed-S``. Each is judged on the checkpoint it
 ended on, on the selection worlds (``rayreach.learning.selection``); the best one's
 checkpoint, curves and best.zip are copied to ``OUT`` with ``starts.json`` saying why, and
-the run goes on from there as any resumed run. Two runs of one worker each stepped about
-1.4 times the decisions per second of one run with two (docs/training.md, "Several
-starts"), so a second start costs about 40 % of its decisions in wall time.
+the run goes on from there as any resumed run. Two KR16 runs of one worker each stepped
+1.36 times the decisions per second of one run with two, so a second start of 5 M
+decisions adds about 5 minutes on two cores (docs/training.md, "Several starts").
 
 An interrupted run resumes with ``--resume``: the starts go on from their checkpoints, and
 once ``OUT`` holds a checkpoint the choice is made and the run resumes from it. A start that

@@ -69,8 +69,8 @@ class TrainConfig:
     paper's kind of scene in the robot's training box; "broad", a user's cell (tables,
     shelves, boxes, clutter, walls) up to the arm's reach (docs/environment.md)."""
     timesteps: int = 40_000_000
-    """Decisions of the whole run (the KR16's: 50 M, ``DEFAULT_BY_ROBOT``): the UR5's 40 M took
-    1 h 29 min on two cores (docs/training.md, "Time")."""
+    """Decisions of the whole run: the UR5's 40 M took 1 h 29 min on two cores, the KR16's,
+    after two starts of 5 M, about 1 h 55 min (docs/training.md, "Several starts")."""
     envs: int = 256
     """Worlds stepped in parallel (baseline: 32 environments split over ``workers``)."""
     vec_env: str = "batched"
@@ -233,16 +233,15 @@ default recipe chooses its best checkpoint on validation worlds."""
 
 
 DEFAULT_BY_ROBOT: dict[str, dict[str, Any]] = {
-    "kr16": {"observation": replace(ObservationConfig.planner(), tip_back=False), "timesteps": 50_000_000,
-             "starts": 2},
+    "kr16": {"observation": replace(ObservationConfig.planner(), tip_back=False), "starts": 2},
 }
 """Where the default recipe differs by robot, each from measurements on validation worlds
 (docs/training.md): the tip-back rays took the UR5 alone from 76.5 to 85.5 % and the KR16,
-whose worlds hold no cover, from 61.0 down to 53.0 % ("The goal under a cover"); the KR16's
-run resumed from 40 to 50 M decisions went from 94.4 to 96.4 % alone on 500 worlds, the UR5's
-from 40 to 56 M from 83.8 to 84.6 % ("Worlds weighted to the kinds that fail"). The KR16
+whose worlds hold no cover, from 61.0 down to 53.0 % ("The goal under a cover"). The KR16
 starts two seeds: one of its four runs never learned to enter the shelf, and showed it by 5 M
-decisions ("A second KR16 run: the shelf")."""
+decisions ("A second KR16 run: the shelf"). Both run 40 M decisions, the most that fit two
+hours on two cores with the KR16's starts: its first run gained two points alone between 40
+and 50 M, its seed 1 scored best at 20 M and no better to 40 M ("Several starts")."""
 
 
 def recipe(name: str, **changes: Any) -> TrainConfig:
