@@ -157,16 +157,18 @@ def test_exported_command_keeps_the_flags_a_resume_keeps():
     assert train_command({**base, "recipe": "paper"}, "RUN").startswith("rayreach train --recipe paper --robot kr16")
     fixed = {**base, "acting_layers": True, "obstacles": {"start": 1, "minimum": 1, "maximum": 1}}
     assert train_command(fixed, "RUN").endswith("--checkpoint-every 250000 --acting-layers --obstacles 1 [--resume]")
-    assert train_command({**base, "recipe": "default", "suite": "broad", "decision_period": 4}, "RUN").endswith(
+    kr16 = {"starts": 2}  # the KR16's default recipe starts two seeds; a run saved before starts had one
+    assert train_command({**base, **kr16, "recipe": "default", "suite": "broad", "decision_period": 4}, "RUN").endswith(
         "--checkpoint-every 250000 --suite broad [--resume]")
     # a default run made before the decision period decided every control step
-    assert train_command({**base, "recipe": "default"}, "RUN").endswith("--decision-period 1 [--resume]")
-    base = {**base, "decision_period": 4}
+    assert train_command({**base, **kr16, "recipe": "default"}, "RUN").endswith("--decision-period 1 [--resume]")
+    assert train_command({**base, "recipe": "default"}, "RUN").endswith("--decision-period 1 --starts 1 [--resume]")
+    base = {**base, **kr16, "decision_period": 4}
     slanted = asdict(replace(recipe("default", robot="kr16").observation, slanted=True))
     assert train_command({**base, "recipe": "default", "observation": slanted}, "RUN").endswith(
         "--checkpoint-every 250000 --slanted [--resume]")
     no_tip_back = asdict(replace(recipe("default", robot="ur5").observation, tip_back=False))
-    assert train_command({**base, "robot": "ur5", "recipe": "default", "observation": no_tip_back}, "RUN").endswith(
+    assert train_command({**base, "robot": "ur5", "starts": 1, "recipe": "default", "observation": no_tip_back}, "RUN").endswith(
         "--checkpoint-every 250000 --no-tip-back [--resume]")
     covers = {**base, "recipe": "default", "extra_kinds": ["goal_cover", "goal_cover"]}
     assert train_command(covers, "RUN").endswith("--checkpoint-every 250000 --extra-kinds goal_cover,goal_cover [--resume]")

@@ -45,8 +45,9 @@ def train_command(config: dict, out: str | Path) -> str:
         command += f" --validate-worlds {config['validate_worlds']}"
     if usual is not None and config.get("starts", 1) != usual.starts:
         command += f" --starts {config.get('starts', 1)}"
-    if usual is not None and config.get("starts", 1) > 1 and config["start_decisions"] != usual.start_decisions:
-        command += f" --start-decisions {config['start_decisions']}"
+    length = config.get("start_decisions")
+    if usual is not None and config.get("starts", 1) > 1 and length not in (None, usual.start_decisions):
+        command += f" --start-decisions {length}"
     obstacles = config.get("obstacles", {})
     if obstacles and obstacles["minimum"] == obstacles["maximum"] == obstacles["start"]:
         command += f" --obstacles {obstacles['start']}"
