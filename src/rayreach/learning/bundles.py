@@ -13,9 +13,10 @@ import json
 import os
 import tempfile
 import zipfile
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Iterator
 
 import numpy as np
 
@@ -80,39 +81,45 @@ def save_bundle(model: Any, path: str | Path, meta: dict[str, Any], vecnorm: Any
     ``vecnorm``: a VecNormalize, or the arrays ``read_bundle_meta`` returned for one."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".", suffix=".part.zip")
-    os.close(fd)
-    try:
+    with _written_atomically(path) as tmp:
         model.save(tmp)
         with zipfile.ZipFile(tmp, "a") as archive:
-            archive.writestr(META_ENTRY, json.dumps({"format": FORMAT, **meta}, indent=2, default=_json_default))
+            _write_meta(archive, meta)
             if vecnorm is not None:
                 buffer = io.BytesIO()
                 np.savez(buffer, **(vecnorm if isinstance(vecnorm, dict) else normalization_arrays(vecnorm)))
                 archive.writestr(NORM_ENTRY, buffer.getvalue())
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.remove(tmp)
     return path
 
 
 def copy_bundle(source: str | Path, path: str | Path, meta: dict[str, Any]) -> Path:
     """Copy a bundle with new metadata, atomically as ``save_bundle`` writes one."""
     path = Path(path)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".", suffix=".part.zip")
-    os.close(fd)
-    try:
+    with _written_atomically(path) as tmp:
         with zipfile.ZipFile(source) as old, zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as new:
             for item in old.infolist():
                 if item.filename != META_ENTRY:
                     new.writestr(item, old.read(item.filename))
-            new.writestr(META_ENTRY, json.dumps({"format": FORMAT, **meta}, indent=2, default=_json_default))
+            _write_meta(new, meta)
+    return path
+
+
+@contextmanager
+def _written_atomically(path: Path) -> Iterator[str]:
+    """A temporary file beside ``path`` to write; it replaces ``path`` only if the writing
+    ended without an exception, and is removed either way."""
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".", suffix=".part.zip")
+    os.close(fd)
+    try:
+        yield tmp
         os.replace(tmp, path)
     finally:
         if os.path.exists(tmp):
             os.remove(tmp)
-    return path
+
+
+def _write_meta(archive: zipfile.ZipFile, meta: dict[str, Any]) -> None:
+    archive.writestr(META_ENTRY, json.dumps({"format": FORMAT, **meta}, indent=2, default=_json_default))
 
 
 def _json_default(value: Any) -> Any:
