@@ -203,17 +203,18 @@ def test_progress_round_the_obstacles_steps_as_reach_env_does(robot, scenario):
     assert sum(outcomes.values()) >= 20
 
 
-@pytest.mark.parametrize("slanted, sightings", [(False, 0), (True, 0), (False, 4), (True, 3)])
-def test_rays_beyond_the_129_step_as_reach_env_does(slanted, sightings):
-    """Goal-cover and plate worlds, where the tip-back rays see the plate over the goal and
-    the slanted ones plates across the tool; the remembered sightings take the nearest of
-    every ray the policy reads."""
+@pytest.mark.parametrize("slanted, sightings, goal_sight", [(False, 0, False), (True, 0, False), (False, 4, False),
+                                                          (True, 3, True), (False, 0, True)])
+def test_rays_beyond_the_129_step_as_reach_env_does(slanted, sightings, goal_sight):
+    """Goal-cover and plate worlds, where the tip-back rays see the plate over the goal, the
+    slanted ones plates across the tool and the goal rays the cover between the tool and the
+    goal; the remembered sightings take the nearest of every ray the policy reads."""
     from dataclasses import replace
 
     from rayreach.env.observation import ObservationConfig
     from rayreach.scenarios.random_world import RandomWorldConfig
 
-    observation = replace(ObservationConfig.planner(), slanted=slanted, sightings=sightings)
+    observation = replace(ObservationConfig.planner(), slanted=slanted, sightings=sightings, goal_sight=goal_sight)
     outcomes = _compare("ur5", "random", 6, 12, max_steps=100, goal_tolerance=0.1, observation=observation,
                         random_world=RandomWorldConfig(n_obstacles=1, kinds=("goal_cover", "plate")))
     assert sum(outcomes.values()) >= 12

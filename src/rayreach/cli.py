@@ -18,7 +18,8 @@ COMPARE_VARIANTS = ("baseline", "default", "paper", "paper-observation", "no-sca
                     "no-workspace", "entropy",
                     "around-obstacles", "proximity", "gamma-0.995", "gamma-0.998",
                     "tip-back", "no-tip-back", "collision-20", "collision-40", "more-covers", "separate-features", "wide",
-                    "decide-1", "decide-2", "decide-8", "slanted", "slanted-no-tip-back")
+                    "decide-1", "decide-2", "decide-8", "slanted", "slanted-no-tip-back",
+                    "goal-sight")
 """``rayreach.evaluate.compare_recipes.VARIANTS``' names."""
 ROBOT_HELP = " or ".join(ROBOTS)
 
@@ -201,6 +202,9 @@ def build_parser() -> argparse.ArgumentParser:
     train.add_argument("--slanted", action=argparse.BooleanOptionalAction, default=None,
                        help="read the 32 slanted rays along the tool (default: off; a resumed run keeps its own "
                             "observation)")
+    train.add_argument("--goal-sight", action=argparse.BooleanOptionalAction, default=None,
+                       help="read the 3 rays from the tool aimed at the goal (default: off; a resumed run keeps its "
+                            "own observation)")
     train.add_argument("--decision-period", type=int, default=None, metavar="K",
                        help="control steps each action is held for (default: the recipe's, 4; the paper's 1; "
                             "a resumed run keeps its own)")
@@ -632,6 +636,8 @@ def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
     from rayreach.sim.sensors import EXTRA_RAYS
 
     rays = {name: getattr(args, name) for name in EXTRA_RAYS if getattr(args, name) is not None}
+    if args.goal_sight is not None:
+        rays["goal_sight"] = args.goal_sight
     if args.privileged:
         rays["privileged"] = True
     if rays:

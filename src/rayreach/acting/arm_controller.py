@@ -109,6 +109,9 @@ class ArmController:
         self.kin = Kinematics(self.spec, base_position, base_rpy)
         self.rays = RayModel(self.spec, ray_range)
         observation = self.policy.observation
+        if observation.goal_sight:
+            raise ValueError("this policy reads the rays aimed at the goal (ObservationConfig.goal_sight), which the "
+                             "controller cannot take as readings; use a policy without them (every shipped one)")
         self.extra_rays = RayModel.extra(self.spec, ray_range, observation.tip_back, observation.slanted)
         self.ray_range, self.goal_tolerance, self.ik = float(ray_range), float(goal_tolerance), ik
         self.acting = acting

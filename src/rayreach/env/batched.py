@@ -53,7 +53,8 @@ from rayreach.sim.batch_clearance import PER_SPHERE, SPEED_SCALE, clearance
 from rayreach.sim.batch_collision import CollisionWorlds, candidates
 from rayreach.sim.batch_kinematics import solve_steps
 from rayreach.sim.batch_obstacles import ObstacleBatch
-from rayreach.sim.batch_rays import RayArrays, cast_worlds, place_rays
+from rayreach.sim.batch_rays import RayArrays, cast_given, cast_worlds, place_rays
+from rayreach.sim.goal_rays import N_GOAL_RAYS, goal_rays
 from rayreach.sim.kinematics import Kinematics
 from rayreach.sim.scene import Scene
 from rayreach.sim.sensors import N_RAYS, RayModel
@@ -390,8 +391,20 @@ class BatchedReachEnv(VecEnv):
         """Worlds ``which``'s rows of ``Observer.reset``'s and ``step``'s arguments after ``which``."""
         extra = self.extra_fractions[which] if self.extra_layout is not None else None
         nearest = self._nearest(which) if self.observer.config.sightings else None
+        goal_clear = self._goal_clear(which) if self.observer.config.goal_sight else None
         return (self.base_obs[which], self.ee_pos[which], self.fractions[which], self.ws_low[which],
-                self.ws_high[which], extra, nearest)
+                self.ws_high[which], extra, nearest, goal_clear)
+
+    def _goal_clear(self, which: np.ndarray) -> np.ndarray:
+        """Worlds ``which``'s goal rays' fractions (``rayreach.sim.goal_rays``), (k, 3)."""
+        n = self.num_envs
+        origins, directions, lengths = np.zeros((n, N_GOAL_RAYS, 3)), np.zeros((n, N_GOAL_RAYS, 3)), np.ones(n)
+        origins[which], directions[which], lengths[which] = goal_rays(
+            self.ee_pos[which], self.ee_rot[which, :, 2], self.goals[which, self.goal_index[which]],
+            self.spec_robot.tool.length)
+        fractions = np.ones((n, N_GOAL_RAYS))
+        cast_given(origins, directions, lengths, self.obstacles, which, fractions)
+        return fractions[which]
 
     def _nearest(self, which: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Worlds ``which``'s nearest sightings over every ray the policy reads

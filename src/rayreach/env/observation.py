@@ -32,6 +32,9 @@ sightings x 4        each    the nearest point any ray saw in a window of
                              where it was seen minus where the end effector is now, over
                              ``RAY_RANGE`` and clipped to [-1, 1], then 1 if anything was seen
                              (else four zeros)
+goal_sight           3       hit fractions of the rays from the tip, the tool's middle and
+                             the flange towards the goal, as long as the tip is from it
+                             (``rayreach.sim.goal_rays``); 1: the straight way is clear
 privileged           6 per   a teacher's only (``BatchedReachEnv``): for each of the arm's
                      sphere  collision spheres, the nearest obstacle's direction and motion
                              (``rayreach.sim.batch_clearance``)
@@ -45,6 +48,7 @@ from dataclasses import dataclass, replace
 import gymnasium as gym
 import numpy as np
 
+from rayreach.sim.goal_rays import N_GOAL_RAYS
 from rayreach.sim.sensors import N_RAYS, RAY_RANGE, extra_sets
 from rayreach.sim.transforms import matrix_to_rpy
 
@@ -105,6 +109,10 @@ class ObservationConfig:
     ``sightings`` x ``sighting_window`` steps."""
     sighting_window: int = 8
     """Steps per window of sightings: 8 steps of at most 5 mm is up to 4 cm of travel."""
+    goal_sight: bool = False
+    """Three rays from the tool aimed at the goal (``rayreach.sim.goal_rays``): whether the
+    straight way there is clear, which no ray of a fixed layout tells of a thin plate over the
+    goal."""
     privileged: bool = False
     """What only the simulator knows, after everything else: how near each of the arm's
     collision spheres is to the obstacles and how they move (``rayreach.sim.batch_clearance``).
@@ -139,7 +147,7 @@ class ObservationConfig:
         """Values appended after the paper's, for ``n_rays`` rays (the privileged part, whose
         size depends on the robot, is the env's to add)."""
         return (6 * self.goal_direction + 6 * self.workspace + 3 * self.motion + self.scans * (n_rays + 3)
-                + self.extra_rays + 4 * self.sightings)
+                + self.extra_rays + 4 * self.sightings + N_GOAL_RAYS * self.goal_sight)
 
     @property
     def extra_rays(self) -> int:
@@ -194,15 +202,19 @@ class Observer:
         if c.sightings:
             low.append(np.tile([-1.0, -1.0, -1.0, 0.0], c.sightings))
             high.append(np.ones(4 * c.sightings))
+        if c.goal_sight:
+            low.append(np.zeros(N_GOAL_RAYS))
+            high.append(np.ones(N_GOAL_RAYS))
         return gym.spaces.Box(np.concatenate(low).astype(np.float32), np.concatenate(high).astype(np.float32),
                               dtype=np.float32)
 
     def reset(self, which: np.ndarray, base: np.ndarray, ee: np.ndarray, rays: np.ndarray,
               ws_low: np.ndarray, ws_high: np.ndarray, extra: np.ndarray | None = None,
-              nearest: tuple[np.ndarray, np.ndarray] | None = None) -> None:
+              nearest: tuple[np.ndarray, np.ndarray] | None = None, goal_clear: np.ndarray | None = None) -> None:
         """Worlds ``which`` start an episode: their memory holds only this moment.
         ``extra``: their fractions of the rays beyond the 129, where the config has them;
-        ``nearest``: their nearest sighting now (``nearest_sightings``), where it has sightings."""
+        ``nearest``: their nearest sighting now (``nearest_sightings``), where it has sightings;
+        ``goal_clear``: their goal rays' fractions (``rayreach.sim.goal_rays``), where it has them."""
         self.t[which] = 0
         self.last_ee[which] = ee
         if self.config.scans:
@@ -210,21 +222,21 @@ class Observer:
             self.scan_ee[which] = ee[:, None, :]
         if self.config.sightings:
             self.sight_range[which] = np.inf
-        self._write(which, base, ee, rays, ws_low, ws_high, extra, nearest)
+        self._write(which, base, ee, rays, ws_low, ws_high, extra, nearest, goal_clear)
 
     def step(self, which: np.ndarray, base: np.ndarray, ee: np.ndarray, rays: np.ndarray,
              ws_low: np.ndarray, ws_high: np.ndarray, extra: np.ndarray | None = None,
-             nearest: tuple[np.ndarray, np.ndarray] | None = None) -> None:
+             nearest: tuple[np.ndarray, np.ndarray] | None = None, goal_clear: np.ndarray | None = None) -> None:
         """Worlds ``which`` took a step; ``base`` is their paper observation after it."""
         self.t[which] += 1
         if self.config.scans:
             slot = self.t[which] % self.length
             self.scan_rays[which, slot] = rays
             self.scan_ee[which, slot] = ee
-        self._write(which, base, ee, rays, ws_low, ws_high, extra, nearest)
+        self._write(which, base, ee, rays, ws_low, ws_high, extra, nearest, goal_clear)
         self.last_ee[which] = ee
 
-    def _write(self, which, base, ee, rays, ws_low, ws_high, extra, nearest) -> None:
+    def _write(self, which, base, ee, rays, ws_low, ws_high, extra, nearest, goal_clear) -> None:
         c, out = self.config, self.obs
         out[which, : self.base_size] = base
         k = self.base_size
@@ -257,7 +269,13 @@ class Observer:
             if nearest is None:
                 raise ValueError(f"this observation remembers {c.sightings} windows of sightings (ObservationConfig."
                                  "sightings); pass the nearest sighting of each world")
-            out[which, k:] = self._sightings(which, ee, *nearest)
+            out[which, k: k + 4 * c.sightings] = self._sightings(which, ee, *nearest)
+            k += 4 * c.sightings
+        if c.goal_sight:
+            if goal_clear is None:
+                raise ValueError("this observation holds the goal rays (ObservationConfig.goal_sight); pass their "
+                                 "fractions")
+            out[which, k: k + N_GOAL_RAYS] = goal_clear
 
     def _sightings(self, which: np.ndarray, ee: np.ndarray, point: np.ndarray, reach: np.ndarray) -> np.ndarray:
         """Worlds ``which``'s sightings part, with this step's nearest sighting kept first.

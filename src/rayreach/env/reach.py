@@ -72,6 +72,7 @@ from rayreach.scenarios import RANDOM, WORLD_SUITES, Scenario, ScenarioError, ge
 from rayreach.scenarios.feasibility import solve_start, validate
 from rayreach.scenarios.random_world import RandomWorldConfig
 from rayreach.scenarios.suites import suite_workspace, world_sampler
+from rayreach.sim.goal_rays import goal_rays
 from rayreach.sim.kinematics import STEP_IK, IKParams, IKResult, Kinematics
 from rayreach.sim.scene import Scene
 from rayreach.sim.sensors import N_RAYS, RAY_RANGE, RayModel
@@ -430,8 +431,16 @@ class ReachEnv(gym.Env):
             beyond = [(*self._extra_rays, self._extra_fractions)] if self._extra is not None else []
             nearest = one_world_sighting(self.config.ray_range, (self._ray_origins, self._ray_directions, rays),
                                          *beyond)
+        goal_clear = self._goal_clear()[None] if self.observer.config.goal_sight else None
         return (ONE_WORLD, self._observation(distance, rays)[None], self.ee_pos[None], rays[None],
-                np.asarray(scenario.workspace_low)[None], np.asarray(scenario.workspace_high)[None], extra, nearest)
+                np.asarray(scenario.workspace_low)[None], np.asarray(scenario.workspace_high)[None], extra, nearest,
+                goal_clear)
+
+    def _goal_clear(self) -> np.ndarray:
+        """The goal rays' fractions now (``rayreach.sim.goal_rays``), (3,)."""
+        origins, directions, lengths = goal_rays(self.ee_pos[None], self.ee_rot[None, :, 2],
+                                                 self.goals[self.goal_index][None], self.spec_robot.tool.length)
+        return self.caster.cast(origins[0], directions[0], float(lengths[0]))
 
     def _observation(self, distance: float, rays: np.ndarray) -> np.ndarray:
         """The paper's 142 values."""

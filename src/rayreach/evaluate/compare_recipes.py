@@ -61,6 +61,7 @@ VARIANTS: dict[str, tuple[str, dict[str, Any]]] = {
     "slanted": ("default", {"observation": replace(ObservationConfig.planner(), slanted=True)}),
     "slanted-no-tip-back": ("default", {"observation": replace(ObservationConfig.planner(), tip_back=False,
                                                                slanted=True)}),
+    "goal-sight": ("default", {"observation": replace(ObservationConfig.planner(), goal_sight=True)}),
 }
 """What can be compared: a recipe, or a recipe with one change (its ablation)."""
 
