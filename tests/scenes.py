@@ -23,3 +23,22 @@ def plate_over_the_tip(back: float, centre_out: float, half: float):
                          name="plate_0")
     return drawn_scenario("plate", "ur5", np.asarray(spec.home), tip[:3, 3] + 0.3 * out, [plate],
                           spec.workspace_low, spec.workspace_high, "a plate over the tool's tip")
+
+
+def wall_before_the_goal(wall_at: float, goal_out: float, reach_up: float):
+    """UR5 at its home joints; the goal ``goal_out`` m out along the tool frame's x; a wall
+    4 mm thick square to that way, its near face ``wall_at`` m out, reaching ``reach_up`` m up
+    the tool from the tip's height (and as far below it)."""
+    from rayreach.robots import get_robot
+    from rayreach.scenarios.random_world import drawn_scenario
+    from rayreach.scenarios.schema import ObstacleSpec
+    from rayreach.sim.kinematics import Kinematics
+    from rayreach.sim.transforms import matrix_to_rpy
+
+    spec = get_robot("ur5")
+    tip = Kinematics(spec).fk(np.asarray(spec.home))
+    out = tip[:3, 0]
+    wall = ObstacleSpec("box", tuple(tip[:3, 3] + (wall_at + 0.002) * out),
+                        rpy=tuple(matrix_to_rpy(tip[:3, :3])), half_extents=(0.002, 0.1, reach_up), name="wall_0")
+    return drawn_scenario("wall", "ur5", np.asarray(spec.home), tip[:3, 3] + goal_out * out, [wall],
+                          spec.workspace_low, spec.workspace_high, "a wall between the tip and the goal")

@@ -21,7 +21,7 @@ from rayreach.learning.onnx_export import export_onnx
 from rayreach.learning.policy import load_policy
 from rayreach.planners.drl import shipped_model
 from rayreach.robots.urdf import TOOL_LINK
-from scenes import plate_over_the_tip
+from scenes import plate_over_the_tip, wall_before_the_goal
 
 
 @pytest.mark.parametrize("robot, scenario", [("ur5", "exp1"), ("kr16", "exp4")])
@@ -137,7 +137,7 @@ def test_controller_takes_metres_as_well_as_fractions(controller):
     controller.reset(home, [0.0, 0.5, 0.3])
     in_metres = controller.step(home, np.full(129, 0.5 * controller.ray_range), unit="m")
     np.testing.assert_array_equal(in_fractions.q_target, in_metres.q_target)
-    assert controller._fractions(np.full(129, 7.0), "m").tolist() == [1.0] * 129  # beyond the range: nothing seen
+    assert controller._fractions(np.full(129, 7.0), "m", 1.0).tolist() == [1.0] * 129  # beyond the range: nothing seen
 
 
 @pytest.mark.parametrize("readings, unit, message", [
@@ -202,5 +202,53 @@ def test_a_policy_with_tip_back_rays_reads_them_after_the_129(tmp_path, sighting
             np.testing.assert_allclose(step.q_target, reach.q, atol=1e-12)
             if terminated or truncated:
                 break
+    finally:
+        env.close()
+
+
+def test_a_policy_with_goal_rays_reads_them_last_in_fractions_or_metres(tmp_path):
+    """A policy observing the rays aimed at the goal: the controller says where to cast them
+    (as the env casts them) and, fed their readings after the 129, as fractions of their
+    length or in metres, builds the observation the env built."""
+    from rayreach.env.observation import ObservationConfig
+    from rayreach.learning.train import TrainConfig, train
+    from rayreach.sim.goal_rays import goal_rays
+
+    config = TrainConfig(robot="ur5", timesteps=64, envs=1, n_steps=64, batch_size=64, n_epochs=1,
+                         observation=ObservationConfig(motion=True, goal_sight=True))
+    policy = load_policy(train(config, tmp_path))
+    acting = ActingConfig().without("arm_guard")
+    env = ActingEnv(ReachEnv(scenario=wall_before_the_goal(0.1, 0.2, 0.1),
+                             observation=policy.observation), acting)
+    try:
+        actor = ActingPolicy(policy, resample=acting.resample)
+        actor.reset(0)
+        obs, info = env.reset(seed=0)
+        reach = env.unwrapped
+        controller = ArmController(policy, acting=acting, base_position=reach.scenario.base_position,
+                                   base_rpy=reach.scenario.base_rpy)
+        assert controller.n_readings == 132
+        controller.reset(reach.q, reach.goals[0], reach.scenario.workspace_low, reach.scenario.workspace_high)
+        with pytest.raises(ValueError, match=re.escape("readings must hold the 129 rays, then the 3 goal rays")):
+            controller.step(reach.q.copy(), reach._ray_fractions.copy())
+        seen = 0
+        for k in range(30):
+            origins, directions, length = controller.goal_rays(reach.q)
+            expected = goal_rays(reach.ee_pos[None], reach.ee_rot[None, :, 2], reach.goals[0][None], 0.13)
+            np.testing.assert_allclose(origins, expected[0][0], atol=1e-9)
+            np.testing.assert_allclose(directions, expected[1][0], atol=1e-9)
+            clear = reach.caster.cast(origins, directions, length)
+            seen += int((clear < 1).any())
+            if k % 2:
+                step = controller.step(reach.q.copy(), np.r_[reach._ray_fractions, clear])
+            else:
+                metres = np.r_[reach._ray_fractions * 0.4, np.where(clear < 1, clear * length, 5.0)]
+                step = controller.step(reach.q.copy(), metres, unit="m")
+            np.testing.assert_allclose(controller.observer.obs[0], obs, atol=1e-6)
+            obs, _, terminated, truncated, info = env.step(actor.act(obs, info))
+            np.testing.assert_allclose(step.q_target, reach.q, atol=1e-12)
+            if terminated or truncated:
+                break
+        assert seen  # the wall stood between the tool and the goal
     finally:
         env.close()

@@ -13,31 +13,13 @@ from rayreach.env.batched import BatchedReachEnv
 from rayreach.env.observation import ObservationConfig
 from rayreach.env.reach import ReachEnv
 from rayreach.sim.goal_rays import N_GOAL_RAYS, SHORTEST, goal_rays
+from scenes import wall_before_the_goal
 
 SIGHT = replace(ObservationConfig.planner(), goal_sight=True)
 WALL_AT = 0.1
 """How far out from the tip the wall's near face stands, m."""
 GOAL_OUT = 0.2
 """How far out from the tip the goal lies, m."""
-
-
-def _wall_before_the_goal(reach_up: float):
-    """UR5 at its home joints; the goal ``GOAL_OUT`` m out along the tool frame's x; a thin
-    wall square to that way, its near face ``WALL_AT`` m out, reaching ``reach_up`` m up the
-    tool from the tip's height (and as far below it)."""
-    from rayreach.robots import get_robot
-    from rayreach.scenarios.random_world import drawn_scenario
-    from rayreach.scenarios.schema import ObstacleSpec
-    from rayreach.sim.kinematics import Kinematics
-    from rayreach.sim.transforms import matrix_to_rpy
-
-    spec = get_robot("ur5")
-    tip = Kinematics(spec).fk(np.asarray(spec.home))
-    out = tip[:3, 0]
-    wall = ObstacleSpec("box", tuple(tip[:3, 3] + (WALL_AT + 0.002) * out),
-                        rpy=tuple(matrix_to_rpy(tip[:3, :3])), half_extents=(0.002, 0.1, reach_up), name="wall_0")
-    return drawn_scenario("wall", "ur5", np.asarray(spec.home), tip[:3, 3] + GOAL_OUT * out, [wall],
-                          spec.workspace_low, spec.workspace_high, "a wall between the tip and the goal")
 
 
 def test_the_rays_start_along_the_tool_and_run_parallel_to_the_goal_offset():
@@ -60,7 +42,7 @@ def test_the_rays_start_along_the_tool_and_run_parallel_to_the_goal_offset():
 ])
 @pytest.mark.parametrize("backend", ["bullet", "numpy"])
 def test_a_wall_before_the_goal_reads_where_it_stands_on_each_ray_that_meets_it(reach_up, expected, backend):
-    env = ReachEnv(scenario=_wall_before_the_goal(reach_up), observation=SIGHT, ray_backend=backend)
+    env = ReachEnv(scenario=wall_before_the_goal(WALL_AT, GOAL_OUT, reach_up), observation=SIGHT, ray_backend=backend)
     try:
         obs, _ = env.reset(seed=0)
         np.testing.assert_allclose(obs[-N_GOAL_RAYS:], expected, atol=2e-3)
@@ -69,7 +51,7 @@ def test_a_wall_before_the_goal_reads_where_it_stands_on_each_ray_that_meets_it(
 
 
 def test_the_batched_env_reads_the_goal_rays_as_reach_env_does_with_pybullet():
-    scenario = _wall_before_the_goal(0.1)
+    scenario = wall_before_the_goal(WALL_AT, GOAL_OUT, 0.1)
     single = ReachEnv(scenario=scenario, observation=SIGHT, ray_backend="bullet")
     batched = BatchedReachEnv(None, 2, scenario, observation=SIGHT, seed=0)
     try:

@@ -44,6 +44,7 @@ from rayreach.env.perception import Perception
 from rayreach.env.rewards import RewardWeights
 from rayreach.robots import RobotSpec, get_robot
 from rayreach.robots.urdf import TOOL_LINK
+from rayreach.sim.goal_rays import N_GOAL_RAYS, SHORTEST, goal_rays
 from rayreach.sim.kinematics import STEP_IK, IKParams, IKResult, Kinematics
 from rayreach.sim.sensors import N_RAYS, RAY_RANGE, RayModel, extra_sets
 
@@ -109,9 +110,6 @@ class ArmController:
         self.kin = Kinematics(self.spec, base_position, base_rpy)
         self.rays = RayModel(self.spec, ray_range)
         observation = self.policy.observation
-        if observation.goal_sight:
-            raise ValueError("this policy reads the rays aimed at the goal (ObservationConfig.goal_sight), which the "
-                             "controller cannot take as readings; use a policy without them (every shipped one)")
         self.extra_rays = RayModel.extra(self.spec, ray_range, observation.tip_back, observation.slanted)
         self.ray_range, self.goal_tolerance, self.ik = float(ray_range), float(goal_tolerance), ik
         self.acting = acting
@@ -121,10 +119,11 @@ class ArmController:
                                                                     RewardWeights(), capsules)
         self.actor = ActingPolicy(self.policy, deterministic=True, resample=acting.resample)
         self.observer = Observer(self.policy.observation, 1, N_RAYS, OBS_SIZE, self.spec.ee_step)
-        self.n_readings = N_RAYS + self.policy.observation.extra_rays
+        self.n_goal_rays = N_GOAL_RAYS * observation.goal_sight
+        self.n_readings = N_RAYS + observation.extra_rays + self.n_goal_rays
         """Ray readings a step takes: the paper's 129, then the rays the policy observes beyond
-        them, the 24 tip-back and the 32 slanted (``rayreach rays --tip-back --slanted``); the
-        acting layers read the 129."""
+        them, the 24 tip-back and the 32 slanted (``rayreach rays --tip-back --slanted``), then
+        the 3 aimed at the goal (``goal_rays``); the acting layers read the 129."""
         self.step_scale = np.array([self.spec.ee_step] * 3 + [self.spec.rot_step] * 3)
         self.seed = seed
         self._goal: np.ndarray | None = None
@@ -137,6 +136,17 @@ class ArmController:
         beyond = ([(*self.extra_rays.world_rays(frames), extra[0])]
                   if extra is not None and self.extra_rays is not None else [])
         return one_world_sighting(self.ray_range, (origins, directions, fractions), *beyond)
+
+    def goal_rays(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+        """Where to cast the 3 rays aimed at the goal with the arm at joints ``q``, for a policy
+        that reads them (``observation.goal_sight``): origins and unit directions (3, 3), m, and
+        their length, m (``rayreach.sim.goal_rays``). Their readings go last in ``step``'s."""
+        if self._goal is None:
+            raise RuntimeError("call reset(q, goal) before goal_rays()")
+        ee = self.kin.fk(self._q_checked(q))
+        origins, directions, lengths = goal_rays(ee[None, :3, 3], ee[None, :3, 2], self._goal[None],
+                                                 self.spec.tool.length)
+        return origins[0], directions[0], float(lengths[0])
 
     # ------------------------------------------------------------------ a query
     def reset(self, q: np.ndarray, goal: np.ndarray, workspace_low: np.ndarray | None = None,
@@ -162,18 +172,21 @@ class ArmController:
 
     def step(self, q: np.ndarray, readings: np.ndarray, unit: str = "fraction") -> ControlStep:
         """The next joint target from the measured joints ``q`` (rad) and the ``n_readings``
-        ray ``readings``: the 129, then the tip-back and the slanted ones where the policy has them
-        (``unit``: ``fraction`` of the range, 1 for nothing seen, or ``m``, where anything
-        at or beyond the range reads as nothing seen)."""
+        ray ``readings``: the 129, then the tip-back and the slanted ones where the policy has them,
+        then the goal rays cast from ``goal_rays(q)`` where it has those (``unit``: ``fraction``
+        of the range, or of the goal rays' length, 1 for nothing seen; or ``m``, where anything at
+        or beyond that reads as nothing seen)."""
         if self._goal is None:
             raise RuntimeError("call reset(q, goal) before step()")
         q = self._q_checked(q)
-        fractions = self._fractions(readings, unit)
-        extra = fractions[None, N_RAYS:] if self.n_readings > N_RAYS else None
-        fractions = fractions[:N_RAYS]
         frames = self.kin.frames(q)
         ee = self.kin.ee_from_frames(frames)
         ee_pos, ee_rot = ee[:3, 3].copy(), ee[:3, :3].copy()
+        fractions = self._fractions(readings, unit, float(np.linalg.norm(self._goal - ee_pos)))
+        goal_clear = fractions[None, self.n_readings - self.n_goal_rays:] if self.n_goal_rays else None
+        fractions = fractions[: self.n_readings - self.n_goal_rays]
+        extra = fractions[None, N_RAYS:] if len(fractions) > N_RAYS else None
+        fractions = fractions[:N_RAYS]
         origins, directions = self.rays.world_rays(frames)
         now = Perception(step=self._steps, q=q, ee_position=ee_pos, ee_rotation=ee_rot, goal=self._goal,
                          origins=origins, directions=directions, lengths=fractions * self.ray_range,
@@ -182,7 +195,8 @@ class ArmController:
         first = self._episode is None
         base = paper_observation(q, self._goal, ee_pos, ee_rot, self._ref_rot_t, distance, fractions)[None]
         nearest = self._nearest(frames, origins, directions, fractions, extra)
-        args = (ONE_WORLD, base, ee_pos[None], fractions[None], self._low[None], self._high[None], extra, nearest)
+        args = (ONE_WORLD, base, ee_pos[None], fractions[None], self._low[None], self._high[None], extra, nearest,
+                goal_clear)
         if first:
             memory = RayMemory()
             memory.add(now, moved=True)
@@ -229,19 +243,26 @@ class ArmController:
             raise ValueError(f"joint angles outside the robot's limits: {names}")
         return q
 
-    def _fractions(self, readings: Any, unit: str) -> np.ndarray:
+    def _fractions(self, readings: Any, unit: str, goal_distance: float) -> np.ndarray:
+        """``readings`` as fractions: of the range, and of the goal rays' length (``goal_distance``,
+        at least ``SHORTEST``) for those."""
         if unit not in UNITS:
             raise ValueError(f"unknown unit '{unit}'; valid: {', '.join(UNITS)}")
         r = np.array(readings, dtype=float).reshape(-1)  # a copy, as in _vector
         if r.shape != (self.n_readings,):
-            what = f"{N_RAYS} rays" + "".join(f", then the {n} {name} rays" for name, n, _ in extra_sets(self.policy.observation.tip_back, self.policy.observation.slanted))
+            observation = self.policy.observation
+            what = f"{N_RAYS} rays" + "".join(f", then the {n} {name} rays"
+                                              for name, n, _ in extra_sets(observation.tip_back, observation.slanted))
+            what += f", then the {N_GOAL_RAYS} goal rays" if self.n_goal_rays else ""
             raise ValueError(f"readings must hold the {what} in the layout's order (docs/rays.md, rayreach rays), "
                              f"got {np.asarray(readings).shape}")
         if not np.all(np.isfinite(r)) or np.any(r < 0):
             bad = np.flatnonzero(~np.isfinite(r) | (r < 0))
             raise ValueError(f"ray readings must be finite and >= 0; rays {bad.tolist()[:10]} are not")
         if unit == "m":
-            return np.minimum(r / self.ray_range, 1.0)
+            lengths = np.full(len(r), self.ray_range)
+            lengths[len(r) - self.n_goal_rays:] = max(goal_distance, SHORTEST)
+            return np.minimum(r / lengths, 1.0)
         if np.any(r > 1.0):
             raise ValueError(f"fractions must lie in [0, 1] (1: nothing within {self.ray_range} m); rays "
                              f"{np.flatnonzero(r > 1.0).tolist()[:10]} exceed 1 (metres? pass unit='m')")
