@@ -168,6 +168,40 @@ def test_controller_refuses_bad_joints_goals_and_order():
         ArmController("ur5", robot="kr16")
 
 
+def _follow_beside_the_env(tmp_path, observation, scenario, n_readings: int, refused: str, readings, steps: int):
+    """A tiny policy reading ``observation`` acts in ``scenario`` (arm guard off) and a
+    controller beside it is fed ``readings(reach, k)`` (readings, unit) at each step ``k``:
+    its observation and joint target must be the env's. The 129 alone are refused with
+    ``refused``."""
+    from rayreach.learning.train import TrainConfig, train
+
+    config = TrainConfig(robot="ur5", timesteps=64, envs=1, n_steps=64, batch_size=64, n_epochs=1,
+                         observation=observation)
+    policy = load_policy(train(config, tmp_path))
+    acting = ActingConfig().without("arm_guard")
+    env = ActingEnv(ReachEnv(scenario=scenario, observation=policy.observation), acting)
+    try:
+        actor = ActingPolicy(policy, resample=acting.resample)
+        actor.reset(0)
+        obs, info = env.reset(seed=0)
+        reach = env.unwrapped
+        controller = ArmController(policy, acting=acting, base_position=reach.scenario.base_position,
+                                   base_rpy=reach.scenario.base_rpy)
+        assert controller.n_readings == n_readings
+        controller.reset(reach.q, reach.goals[0], reach.scenario.workspace_low, reach.scenario.workspace_high)
+        with pytest.raises(ValueError, match=re.escape(refused)):
+            controller.step(reach.q.copy(), reach._ray_fractions.copy())
+        for k in range(steps):
+            step = controller.step(reach.q.copy(), *readings(reach, controller, k))
+            np.testing.assert_allclose(controller.observer.obs[0], obs, atol=1e-6)
+            obs, _, terminated, truncated, info = env.step(actor.act(obs, info))
+            np.testing.assert_allclose(step.q_target, reach.q, atol=1e-12)
+            if terminated or truncated:
+                break
+    finally:
+        env.close()
+
+
 @pytest.mark.parametrize("sightings", [0, 3])
 def test_a_policy_with_tip_back_rays_reads_them_after_the_129(tmp_path, sightings):
     """A policy observing the tip-back rays (and remembering sightings over them and the
@@ -175,35 +209,14 @@ def test_a_policy_with_tip_back_rays_reads_them_after_the_129(tmp_path, sighting
     observation the env built and commands the same joints; the 129 alone are refused with
     what it takes."""
     from rayreach.env.observation import ObservationConfig
-    from rayreach.learning.train import TrainConfig, train
 
-    config = TrainConfig(robot="ur5", timesteps=64, envs=1, n_steps=64, batch_size=64, n_epochs=1,
-                         observation=ObservationConfig(motion=True, tip_back=True, sightings=sightings))
-    policy = load_policy(train(config, tmp_path))
-    acting = ActingConfig().without("arm_guard")
-    env = ActingEnv(ReachEnv(scenario=plate_over_the_tip(back=0.05, centre_out=0.1, half=0.07),
-                             observation=policy.observation), acting)
-    try:
-        actor = ActingPolicy(policy, resample=acting.resample)
-        actor.reset(0)
-        obs, info = env.reset(seed=0)
-        reach = env.unwrapped
-        controller = ArmController(policy, acting=acting, base_position=reach.scenario.base_position,
-                                   base_rpy=reach.scenario.base_rpy)
-        assert controller.n_readings == 153
-        controller.reset(reach.q, reach.goals[0], reach.scenario.workspace_low, reach.scenario.workspace_high)
-        with pytest.raises(ValueError, match=re.escape("readings must hold the 129 rays, then the 24 tip-back rays")):
-            controller.step(reach.q.copy(), reach._ray_fractions.copy())
-        assert (reach._extra_fractions < 1).sum() >= 4  # the plate is in their sight
-        for _ in range(40):
-            step = controller.step(reach.q.copy(), np.r_[reach._ray_fractions, reach._extra_fractions])
-            np.testing.assert_allclose(controller.observer.obs[0], obs, atol=1e-6)
-            obs, _, terminated, truncated, info = env.step(actor.act(obs, info))
-            np.testing.assert_allclose(step.q_target, reach.q, atol=1e-12)
-            if terminated or truncated:
-                break
-    finally:
-        env.close()
+    def readings(reach, controller, k):
+        assert (reach._extra_fractions < 1).sum() >= 4 or k  # the plate is in their sight
+        return np.r_[reach._ray_fractions, reach._extra_fractions], "fraction"
+
+    _follow_beside_the_env(tmp_path, ObservationConfig(motion=True, tip_back=True, sightings=sightings),
+                           plate_over_the_tip(back=0.05, centre_out=0.1, half=0.07), 153,
+                           "readings must hold the 129 rays, then the 24 tip-back rays", readings, 40)
 
 
 def test_a_policy_with_goal_rays_reads_them_last_in_fractions_or_metres(tmp_path):
@@ -211,44 +224,21 @@ def test_a_policy_with_goal_rays_reads_them_last_in_fractions_or_metres(tmp_path
     (as the env casts them) and, fed their readings after the 129, as fractions of their
     length or in metres, builds the observation the env built."""
     from rayreach.env.observation import ObservationConfig
-    from rayreach.learning.train import TrainConfig, train
     from rayreach.sim.goal_rays import goal_rays
 
-    config = TrainConfig(robot="ur5", timesteps=64, envs=1, n_steps=64, batch_size=64, n_epochs=1,
-                         observation=ObservationConfig(motion=True, goal_sight=True))
-    policy = load_policy(train(config, tmp_path))
-    acting = ActingConfig().without("arm_guard")
-    env = ActingEnv(ReachEnv(scenario=wall_before_the_goal(0.1, 0.2, 0.1),
-                             observation=policy.observation), acting)
-    try:
-        actor = ActingPolicy(policy, resample=acting.resample)
-        actor.reset(0)
-        obs, info = env.reset(seed=0)
-        reach = env.unwrapped
-        controller = ArmController(policy, acting=acting, base_position=reach.scenario.base_position,
-                                   base_rpy=reach.scenario.base_rpy)
-        assert controller.n_readings == 132
-        controller.reset(reach.q, reach.goals[0], reach.scenario.workspace_low, reach.scenario.workspace_high)
-        with pytest.raises(ValueError, match=re.escape("readings must hold the 129 rays, then the 3 goal rays")):
-            controller.step(reach.q.copy(), reach._ray_fractions.copy())
-        seen = 0
-        for k in range(30):
-            origins, directions, length = controller.goal_rays(reach.q)
-            expected = goal_rays(reach.ee_pos[None], reach.ee_rot[None, :, 2], reach.goals[0][None], 0.13)
-            np.testing.assert_allclose(origins, expected[0][0], atol=1e-9)
-            np.testing.assert_allclose(directions, expected[1][0], atol=1e-9)
-            clear = reach.caster.cast(origins, directions, length)
-            seen += int((clear < 1).any())
-            if k % 2:
-                step = controller.step(reach.q.copy(), np.r_[reach._ray_fractions, clear])
-            else:
-                metres = np.r_[reach._ray_fractions * 0.4, np.where(clear < 1, clear * length, 5.0)]
-                step = controller.step(reach.q.copy(), metres, unit="m")
-            np.testing.assert_allclose(controller.observer.obs[0], obs, atol=1e-6)
-            obs, _, terminated, truncated, info = env.step(actor.act(obs, info))
-            np.testing.assert_allclose(step.q_target, reach.q, atol=1e-12)
-            if terminated or truncated:
-                break
-        assert seen  # the wall stood between the tool and the goal
-    finally:
-        env.close()
+    seen = []
+
+    def readings(reach, controller, k):
+        origins, directions, length = controller.goal_rays(reach.q)
+        expected = goal_rays(reach.ee_pos[None], reach.ee_rot[None, :, 2], reach.goals[0][None], 0.13)
+        np.testing.assert_allclose(origins, expected[0][0], atol=1e-9)
+        np.testing.assert_allclose(directions, expected[1][0], atol=1e-9)
+        clear = reach.caster.cast(origins, directions, length)
+        seen.append((clear < 1).any())
+        if k % 2:
+            return np.r_[reach._ray_fractions, clear], "fraction"
+        return np.r_[reach._ray_fractions * 0.4, np.where(clear < 1, clear * length, 5.0)], "m"
+
+    _follow_beside_the_env(tmp_path, ObservationConfig(motion=True, goal_sight=True), wall_before_the_goal(0.1, 0.2, 0.1),
+                           132, "readings must hold the 129 rays, then the 3 goal rays", readings, 30)
+    assert any(seen)  # the wall stood between the tool and the goal
