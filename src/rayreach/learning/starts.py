@@ -32,6 +32,7 @@ from typing import Any, Callable, Sequence
 
 from rayreach.learning import selection
 from rayreach.learning.bundles import CheckpointError, copy_bundle, read_bundle_meta
+from rayreach.learning.run_lock import held
 from rayreach.learning.sweep import Trial, run_trial
 from rayreach.learning.train import CHECKPOINT, CURVE, TrainConfig, append_curve, train
 
@@ -125,19 +126,20 @@ def train_with_starts(config: TrainConfig, out: str | Path, resume: bool = False
                                       "or choose another --out")
     elif not (out / STARTS_DIR).exists():
         raise CheckpointError(f"--resume: no checkpoint at {out / CHECKPOINT} and no starts in {out / STARTS_DIR}")
-    out.mkdir(parents=True, exist_ok=True)
-    trials = plan_starts(config, out)
-    errors = (runner or run_in_processes)(trials, command)
-    if errors:
-        raise RuntimeError("the choice waits for every start; " + "; ".join(f"{k}: {v}" for k, v in errors.items())
-                           + "; resume with --resume")
-    results = [judge(trial) for trial in trials]
-    chosen = choose(results)
-    wall_time = max(r.wall_time for r in results)
-    report = {"chosen_seed": chosen.seed, "start_decisions": config.start_decisions, "wall_time_s": round(wall_time, 1),
-              "starts": [{"seed": r.seed, "score": r.score, "wall_time_s": round(r.wall_time, 1),
-                          "validation": r.row} for r in results]}
-    carry_over(next(t for t in trials if t.config.seed == chosen.seed), out, report, wall_time)
+    with held(out):  # let go before the chosen run goes on, which holds it again
+        trials = plan_starts(config, out)
+        errors = (runner or run_in_processes)(trials, command)
+        if errors:
+            raise RuntimeError("the choice waits for every start; " + "; ".join(f"{k}: {v}" for k, v in errors.items())
+                               + "; resume with --resume")
+        results = [judge(trial) for trial in trials]
+        chosen = choose(results)
+        wall_time = max(r.wall_time for r in results)
+        report = {"chosen_seed": chosen.seed, "start_decisions": config.start_decisions,
+                  "wall_time_s": round(wall_time, 1),
+                  "starts": [{"seed": r.seed, "score": r.score, "wall_time_s": round(r.wall_time, 1),
+                              "validation": r.row} for r in results]}
+        carry_over(next(t for t in trials if t.config.seed == chosen.seed), out, report, wall_time)
     print(f"starts: seed {chosen.seed} continues ("
           + ", ".join(f"seed {r.seed}: {r.score:.3f}" for r in results) + ")", flush=True)
     return train(config, out, resume=True, command=command, resume_overrides=resume_overrides if resume else None,

@@ -26,6 +26,7 @@ import numpy as np
 from rayreach.learning.curriculum import AugmentedGoalSize, GoalSizeParams, ObstacleCurriculum, ObstacleParams
 from rayreach.learning.bundles import CheckpointError, read_bundle_meta, restore_normalization, save_bundle
 from rayreach.learning import selection
+from rayreach.learning.run_lock import held
 from rayreach.env.decisions import check_period
 from rayreach.env.observation import ObservationConfig
 from rayreach.env.rewards import RewardWeights
@@ -756,14 +757,20 @@ def train(config: TrainConfig, out: str | Path, resume: bool = False, command: s
     (bench-train's timer); one that returns False ends the part as ``timesteps`` would."""
     if critic_warmup < 0:
         raise ValueError(f"critic_warmup must be >= 0 steps, got {critic_warmup}")
-    out = Path(out)
+    if resume and not (Path(out) / CHECKPOINT).exists():  # before the lock, which makes the directory
+        raise CheckpointError(f"--resume: no checkpoint at {Path(out) / CHECKPOINT}")
+    with held(out):
+        return _train(config, Path(out), resume, command, resume_overrides, critic_warmup, freeze_features, callbacks)
+
+
+def _train(config: TrainConfig, out: Path, resume: bool, command: str, resume_overrides: dict[str, Any] | None,
+           critic_warmup: int, freeze_features: bool, callbacks: Sequence[Any]) -> Path:
+    """``train`` while holding ``out``'s lock."""
     checkpoint = out / CHECKPOINT
     import torch
     from stable_baselines3 import PPO
 
     if resume:
-        if not checkpoint.exists():
-            raise CheckpointError(f"--resume: no checkpoint at {checkpoint}")
         meta, norm = read_bundle_meta(checkpoint)
         if meta.get("kind") != "checkpoint":
             raise CheckpointError(f"{checkpoint} is a {meta.get('kind')} bundle, not a training checkpoint")
