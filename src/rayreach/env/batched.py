@@ -391,12 +391,13 @@ class BatchedReachEnv(VecEnv):
         """Worlds ``which``'s rows of ``Observer.reset``'s and ``step``'s arguments after ``which``."""
         extra = self.extra_fractions[which] if self.extra_layout is not None else None
         nearest = self._nearest(which) if self.observer.config.sightings else None
-        goal_clear = self._goal_clear(which) if self.observer.config.goal_sight else None
+        goal_clear = self.goal_clear(which) if self.observer.config.goal_sight else None
         return (self.base_obs[which], self.ee_pos[which], self.fractions[which], self.ws_low[which],
                 self.ws_high[which], extra, nearest, goal_clear)
 
-    def _goal_clear(self, which: np.ndarray) -> np.ndarray:
-        """Worlds ``which``'s goal rays' fractions (``rayreach.sim.goal_rays``), (k, 3)."""
+    def goal_clear(self, which: np.ndarray) -> np.ndarray:
+        """Worlds ``which``'s goal rays' fractions now (``rayreach.sim.goal_rays``), (k, 3), whether or
+        not the observation holds them."""
         n = self.num_envs
         origins, directions, lengths = np.zeros((n, N_GOAL_RAYS, 3)), np.zeros((n, N_GOAL_RAYS, 3)), np.ones(n)
         origins[which], directions[which], lengths[which] = goal_rays(
