@@ -20,9 +20,11 @@ def _towards_goal(obs: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     return np.clip(np.concatenate((drive, np.zeros((len(obs), 3))), axis=1) + noise, -1, 1).astype(np.float32)
 
 
-def _compare(robot: str, scenario: str, n_worlds: int, episodes: int, **overrides) -> dict[str, int]:
+def _compare(robot: str, scenario: str, n_worlds: int, episodes: int, seen: list | None = None,
+             **overrides) -> dict[str, int]:
     """Step both through the same worlds and actions until ``episodes`` episodes ended; every
-    observation, reward and episode end must agree. Returns the episode outcomes."""
+    observation, reward and episode end must agree. Returns the episode outcomes; ``seen``
+    gets the batched env's observations."""
     batched = BatchedReachEnv(robot, n_worlds, scenario, seed=SEED, **overrides)
     singles = [ReachEnv(robot=robot, scenario=scenario, **overrides) for _ in range(n_worlds)]
     rng = np.random.default_rng(0)
@@ -34,6 +36,8 @@ def _compare(robot: str, scenario: str, n_worlds: int, episodes: int, **override
         while sum(outcomes.values()) < episodes:
             actions = _towards_goal(obs, rng)
             obs, rewards, dones, infos = batched.step(actions)
+            if seen is not None:
+                seen.append(obs.copy())
             for i, env in enumerate(singles):
                 o, r, terminated, truncated, info = env.step(actions[i])
                 assert dones[i] == (terminated or truncated), f"world {i}: episode end differs"
@@ -215,9 +219,12 @@ def test_rays_beyond_the_129_step_as_reach_env_does(slanted, sightings, goal_sig
     from rayreach.scenarios.random_world import RandomWorldConfig
 
     observation = replace(ObservationConfig.planner(), slanted=slanted, sightings=sightings, goal_sight=goal_sight)
+    seen: list[np.ndarray] = []
     outcomes = _compare("ur5", "random", 6, 12, max_steps=100, goal_tolerance=0.1, observation=observation,
-                        random_world=RandomWorldConfig(n_obstacles=1, kinds=("goal_cover", "plate")))
+                        random_world=RandomWorldConfig(n_obstacles=1, kinds=("goal_cover", "plate")), seen=seen)
     assert sum(outcomes.values()) >= 12
+    if goal_sight:  # a cover stood between the tool and the goal
+        assert (np.array(seen)[:, :, -3:] < 1).any()
 
 
 def test_sightings_of_a_plate_many_rays_meet_at_one_distance_step_as_reach_env_does():

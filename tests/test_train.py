@@ -170,6 +170,9 @@ def test_exported_command_keeps_the_flags_a_resume_keeps():
     no_tip_back = asdict(replace(recipe("default", robot="ur5").observation, tip_back=False))
     assert train_command({**base, "robot": "ur5", "starts": 1, "recipe": "default", "observation": no_tip_back}, "RUN").endswith(
         "--checkpoint-every 250000 --no-tip-back [--resume]")
+    sight = asdict(replace(recipe("default", robot="ur5").observation, goal_sight=True))
+    assert train_command({**base, "robot": "ur5", "starts": 1, "recipe": "default", "observation": sight}, "RUN").endswith(
+        "--checkpoint-every 250000 --goal-sight [--resume]")
     covers = {**base, "recipe": "default", "extra_kinds": ["goal_cover", "goal_cover"]}
     assert train_command(covers, "RUN").endswith("--checkpoint-every 250000 --extra-kinds goal_cover,goal_cover [--resume]")
 

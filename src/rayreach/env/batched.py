@@ -408,8 +408,9 @@ class BatchedReachEnv(VecEnv):
         return fractions[which]
 
     def _nearest(self, which: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Worlds ``which``'s nearest sightings over every ray the policy reads
-        (``rayreach.env.observation.nearest_sightings``), placing only the nearest ray of each."""
+        """Worlds ``which``'s nearest sightings over the 129 and the fixed rays beyond them the policy
+        reads, not the goal rays (``rayreach.env.observation.nearest_sightings``), placing only the
+        nearest ray of each."""
         fractions = self.fractions[which]
         if self.extra_layout is not None:
             fractions = np.concatenate((fractions, self.extra_fractions[which]), axis=1)

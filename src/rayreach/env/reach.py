@@ -427,7 +427,7 @@ class ReachEnv(gym.Env):
         assert scenario is not None
         extra = self._extra_fractions[None] if self._extra is not None else None
         nearest = None
-        if self.observer.config.sightings:  # over every ray the policy reads
+        if self.observer.config.sightings:  # over the fixed layouts the policy reads, not the goal rays
             beyond = [(*self._extra_rays, self._extra_fractions)] if self._extra is not None else []
             nearest = one_world_sighting(self.config.ray_range, (self._ray_origins, self._ray_directions, rays),
                                          *beyond)

@@ -31,6 +31,8 @@ def train_command(config: dict, out: str | Path) -> str:
         for field, (flag, _, _) in EXTRA_RAYS.items():
             if observation.get(field, False) != getattr(usual.observation, field):
                 command += f" --{'' if observation.get(field) else 'no-'}{flag}"
+        if observation.get("goal_sight", False) != usual.observation.goal_sight:
+            command += f" --{'' if observation.get('goal_sight') else 'no-'}goal-sight"
         if observation.get("privileged"):
             command += " --privileged"
     period = config.get("decision_period", 1)  # a run saved before the choice decided every step

@@ -119,14 +119,14 @@ def train_with_starts(config: TrainConfig, out: str | Path, resume: bool = False
     if any(train_kwargs.values()):
         raise ValueError(f"{', '.join(k for k, v in train_kwargs.items() if v)} apply to one part of a run: give "
                          "them to a --resume after its starts have chosen")
-    if not resume:
-        for name in (CHECKPOINT, STARTS_DIR, selection.BEST):
-            if (out / name).exists():
-                raise CheckpointError(f"{out / name} is left from an earlier run: pass --resume to continue it, "
-                                      "or choose another --out")
-    elif not (out / STARTS_DIR).exists():
+    if resume and not (out / STARTS_DIR).exists():
         raise CheckpointError(f"--resume: no checkpoint at {out / CHECKPOINT} and no starts in {out / STARTS_DIR}")
     with held(out):  # let go before the chosen run goes on, which holds it again
+        if not resume:
+            for name in (CHECKPOINT, STARTS_DIR, selection.BEST):
+                if (out / name).exists():
+                    raise CheckpointError(f"{out / name} is left from an earlier run: pass --resume to continue it, "
+                                          "or choose another --out")
         trials = plan_starts(config, out)
         errors = (runner or run_in_processes)(trials, command)
         if errors:
