@@ -182,7 +182,8 @@ class ArmController:
         frames = self.kin.frames(q)
         ee = self.kin.ee_from_frames(frames)
         ee_pos, ee_rot = ee[:3, 3].copy(), ee[:3, :3].copy()
-        fractions = self._fractions(readings, unit, float(np.linalg.norm(self._goal - ee_pos)))
+        distance = float(np.linalg.norm(self._goal - ee_pos))
+        fractions = self._fractions(readings, unit, distance)
         goal_clear = fractions[None, self.n_readings - self.n_goal_rays:] if self.n_goal_rays else None
         fractions = fractions[: self.n_readings - self.n_goal_rays]
         extra = fractions[None, N_RAYS:] if len(fractions) > N_RAYS else None
@@ -191,7 +192,6 @@ class ArmController:
         now = Perception(step=self._steps, q=q, ee_position=ee_pos, ee_rotation=ee_rot, goal=self._goal,
                          origins=origins, directions=directions, lengths=fractions * self.ray_range,
                          fractions=fractions, workspace_low=self._low, workspace_high=self._high)
-        distance = float(np.linalg.norm(self._goal - ee_pos))
         first = self._episode is None
         base = paper_observation(q, self._goal, ee_pos, ee_rot, self._ref_rot_t, distance, fractions)[None]
         nearest = self._nearest(frames, origins, directions, fractions, extra)

@@ -757,10 +757,11 @@ def train(config: TrainConfig, out: str | Path, resume: bool = False, command: s
     (bench-train's timer); one that returns False ends the part as ``timesteps`` would."""
     if critic_warmup < 0:
         raise ValueError(f"critic_warmup must be >= 0 steps, got {critic_warmup}")
-    if resume and not (Path(out) / CHECKPOINT).exists():  # before the lock, which makes the directory
-        raise CheckpointError(f"--resume: no checkpoint at {Path(out) / CHECKPOINT}")
+    out = Path(out)
+    if resume and not (out / CHECKPOINT).exists():  # before the lock, which makes the directory
+        raise CheckpointError(f"--resume: no checkpoint at {out / CHECKPOINT}")
     with held(out):
-        return _train(config, Path(out), resume, command, resume_overrides, critic_warmup, freeze_features, callbacks)
+        return _train(config, out, resume, command, resume_overrides, critic_warmup, freeze_features, callbacks)
 
 
 def _train(config: TrainConfig, out: Path, resume: bool, command: str, resume_overrides: dict[str, Any] | None,
