@@ -45,6 +45,13 @@ def test_variants_change_one_thing_of_their_recipe():
     assert recipe("default", robot="ur5").observation.tip_back and not default.observation.tip_back
     for robot in ("ur5", "kr16"):
         assert variant("tip-back", robot).observation.tip_back and not variant("no-tip-back", robot).observation.tip_back
+    # an observation variant changes its named fields of each robot's own default and no other
+    for robot in ("ur5", "kr16"):
+        own = recipe("default", robot=robot).observation
+        for name, named in (("slanted", {"slanted"}), ("goal-sight", {"goal_sight"}), ("sightings", {"sightings"}),
+                            ("long-scans", {"scans", "scan_stride"}), ("no-workspace", {"workspace"})):
+            seen = variant(name, robot).observation
+            assert {f.name for f in fields(own) if getattr(seen, f.name) != getattr(own, f.name)} == named, (robot, name)
     for name, weight in (("collision-20", -20.0), ("collision-40", -40.0)):  # the weight reaches the reward
         assert env_config(variant(name, "ur5")).rewards.collision == weight
     assert env_config(default).rewards.collision == -10.0  # the paper's r_c

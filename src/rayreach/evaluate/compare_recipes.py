@@ -39,17 +39,17 @@ VARIANTS: dict[str, tuple[str, dict[str, Any]]] = {
     "default": ("default", {}),
     "paper": ("paper", {}),
     "paper-observation": ("default", {"observation": ObservationConfig()}),
-    "no-scans": ("default", {"observation": replace(ObservationConfig.planner(), scans=0)}),
-    "long-scans": ("default", {"observation": replace(ObservationConfig.planner(), scans=4, scan_stride=24)}),
-    "sightings": ("default", {"observation": replace(ObservationConfig.planner(), sightings=12)}),
-    "no-workspace": ("default", {"observation": replace(ObservationConfig.planner(), workspace=False)}),
+    "no-scans": ("default", {"observation": {"scans": 0}}),
+    "long-scans": ("default", {"observation": {"scans": 4, "scan_stride": 24}}),
+    "sightings": ("default", {"observation": {"sightings": 12}}),
+    "no-workspace": ("default", {"observation": {"workspace": False}}),
     "entropy": ("default", {"ent_coef": 0.005}),
     "around-obstacles": ("default", {"progress_around_obstacles": True}),
     "proximity": ("default", {"proximity_weight": -0.1}),
     "gamma-0.995": ("default", {"gamma": 0.995}),
     "gamma-0.998": ("default", {"gamma": 0.998}),
-    "tip-back": ("default", {"observation": replace(ObservationConfig.planner(), tip_back=True)}),
-    "no-tip-back": ("default", {"observation": replace(ObservationConfig.planner(), tip_back=False)}),
+    "tip-back": ("default", {"observation": {"tip_back": True}}),
+    "no-tip-back": ("default", {"observation": {"tip_back": False}}),
     "collision-20": ("default", {"collision_weight": -20.0}),
     "collision-40": ("default", {"collision_weight": -40.0}),
     "more-covers": ("default", {"extra_kinds": ("goal_cover", "goal_cover")}),
@@ -58,19 +58,24 @@ VARIANTS: dict[str, tuple[str, dict[str, Any]]] = {
     "decide-1": ("default", {"decision_period": 1}),
     "decide-2": ("default", {"decision_period": 2}),
     "decide-8": ("default", {"decision_period": 8}),
-    "slanted": ("default", {"observation": replace(ObservationConfig.planner(), slanted=True)}),
-    "slanted-no-tip-back": ("default", {"observation": replace(ObservationConfig.planner(), tip_back=False,
-                                                               slanted=True)}),
-    "goal-sight": ("default", {"observation": replace(ObservationConfig.planner(), goal_sight=True)}),
+    "slanted": ("default", {"observation": {"slanted": True}}),
+    "slanted-no-tip-back": ("default", {"observation": {"tip_back": False, "slanted": True}}),
+    "goal-sight": ("default", {"observation": {"goal_sight": True}}),
 }
-"""What can be compared: a recipe, or a recipe with one change (its ablation)."""
+"""What can be compared: a recipe, or a recipe with one change (its ablation). An
+``observation`` given as a dict names the fields that change in the robot's own observation
+under that recipe (the KR16's default has no tip-back rays, the UR5's has), so that a
+variant adds its one change to each robot's default and nothing else."""
 
 
 def variant(name: str, robot: str) -> TrainConfig:
     if name not in VARIANTS:
         raise ValueError(f"unknown variant {name!r}; choose from {', '.join(VARIANTS)}")
     base, changes = VARIANTS[name]
-    return recipe(base, robot=robot, **changes)
+    config = recipe(base, robot=robot)
+    if isinstance(changes.get("observation"), dict):
+        changes = {**changes, "observation": replace(config.observation, **changes["observation"])}
+    return replace(config, **changes)
 
 
 def fixed_task(config: TrainConfig, goal: float = GOAL, obstacles: int = OBSTACLES) -> TrainConfig:
