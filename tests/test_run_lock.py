@@ -12,6 +12,8 @@ import pytest
 
 from rayreach.learning.run_lock import LOCK, RunLockedError, held
 
+PROBE = ("import sys; from rayreach.learning.run_lock import RunLockedError, held\ntry:\n    with held(sys.argv[1]):\n"
+         "        print('free')\nexcept RunLockedError:\n    print('locked')")
 HOLD = "import sys, time; from rayreach.learning.run_lock import held\nwith held(sys.argv[1]):\n    print('held', flush=True)\n    time.sleep(60)"
 
 
@@ -33,6 +35,19 @@ def test_a_second_process_is_refused_until_the_first_is_killed(tmp_path):
         process.wait()
     with held(out):  # a killed holder leaves no stale lock
         assert (out / LOCK).read_text().strip().isdigit()
+
+
+def _probe(out) -> str:
+    return subprocess.run([sys.executable, "-c", PROBE, str(out)], capture_output=True, text=True, check=True).stdout.strip()
+
+
+def test_the_holder_takes_its_directory_again_and_keeps_it_until_the_outer_block_ends(tmp_path):
+    out = tmp_path / "run"
+    with held(out):
+        with held(tmp_path / "." / "run"):  # the parent of several starts going on with the chosen run
+            assert _probe(out) == "locked"
+        assert _probe(out) == "locked"
+    assert _probe(out) == "free"
 
 
 def test_train_is_refused_while_another_process_trains_into_the_directory(tmp_path):

@@ -3,8 +3,9 @@
 Two processes training into one directory would overwrite each other's checkpoints. A
 run holds an advisory lock on ``OUT/.lock`` while it trains; the system lets it go when the
 process ends, however it ends, so a killed run never leaves a stale lock behind. The file
-holds the holder's process id, for the message. Where the system has no ``fcntl``
-(Windows), runs are not locked.
+holds the holder's process id, for the message. A process that holds a directory may take
+it again (the parent of several starts goes on with the chosen one without letting go).
+Where the system has no ``fcntl`` (Windows), runs are not locked.
 """
 
 from __future__ import annotations
@@ -21,6 +22,9 @@ except ImportError:  # pragma: no cover - Windows
 
 LOCK = ".lock"
 
+_HELD: set[Path] = set()
+"""The directories this process holds."""
+
 
 class RunLockedError(ValueError):
     """Another process is training into the directory."""
@@ -32,6 +36,10 @@ def held(out: str | Path) -> Iterator[None]:
     where another process holds it."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
+    key = out.resolve()
+    if key in _HELD:
+        yield
+        return
     with open(out / LOCK, "a+") as handle:
         if fcntl is not None:
             try:
@@ -45,8 +53,10 @@ def held(out: str | Path) -> Iterator[None]:
         handle.truncate()
         handle.write(f"{os.getpid()}\n")
         handle.flush()
+        _HELD.add(key)
         try:
             yield
         finally:
+            _HELD.discard(key)
             if fcntl is not None:
                 fcntl.flock(handle, fcntl.LOCK_UN)

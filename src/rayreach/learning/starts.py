@@ -121,7 +121,7 @@ def train_with_starts(config: TrainConfig, out: str | Path, resume: bool = False
                          "them to a --resume after its starts have chosen")
     if resume and not (out / STARTS_DIR).exists():
         raise CheckpointError(f"--resume: no checkpoint at {out / CHECKPOINT} and no starts in {out / STARTS_DIR}")
-    with held(out):  # let go before the chosen run goes on, which holds it again
+    with held(out):  # from the check to the chosen run's end, which takes it again within this process
         if not resume:
             for name in (CHECKPOINT, STARTS_DIR, selection.BEST):
                 if (out / name).exists():
@@ -140,10 +140,10 @@ def train_with_starts(config: TrainConfig, out: str | Path, resume: bool = False
                   "starts": [{"seed": r.seed, "score": r.score, "wall_time_s": round(r.wall_time, 1),
                               "validation": r.row} for r in results]}
         carry_over(next(t for t in trials if t.config.seed == chosen.seed), out, report, wall_time)
-    print(f"starts: seed {chosen.seed} continues ("
-          + ", ".join(f"seed {r.seed}: {r.score:.3f}" for r in results) + ")", flush=True)
-    return train(config, out, resume=True, command=command, resume_overrides=resume_overrides if resume else None,
-                 **train_kwargs)
+        print(f"starts: seed {chosen.seed} continues ("
+              + ", ".join(f"seed {r.seed}: {r.score:.3f}" for r in results) + ")", flush=True)
+        return train(config, out, resume=True, command=command,
+                     resume_overrides=resume_overrides if resume else None, **train_kwargs)
 
 
 # ---------------------------------------------------------------------- processes
