@@ -224,6 +224,41 @@ def test_the_final_approach_takes_over_only_while_it_is_on():
             env.close()
 
 
+@pytest.mark.parametrize("give_way", [False, True])
+def test_a_final_approach_the_arms_rule_holds_gives_way_to_the_policy_only_when_asked(give_way, monkeypatch):
+    """The arm's rule stands in for a wrist beside a shelf's board: it refuses every straight
+    step. Without ``give_way`` the final approach asks again and again and the arm stays
+    held; with it, after the first held step the policy's own steps (+x, at the goal) go
+    through and reach the goal."""
+    from rayreach.acting.layers import ArmRule
+    from rayreach.acting.pipeline import Verdict
+
+    original = ArmRule.veto
+    monkeypatch.setattr(ArmRule, "veto", lambda self, command, *rest: Verdict.REFUSE if command.straight
+                        else original(self, command, *rest))
+    config = dataclasses.replace(ActingConfig().without("detour", "resample"),
+                                 final_approach=FinalApproach(give_way=give_way))
+    env = acting_around_the_tool([], config, np.array([0.06, 0.0, 0.0]))
+    try:
+        env.reset(seed=0)
+        proposed, sources = [], []
+        for _ in range(20):
+            _, _, terminated, _, info = env.step(np.array([1, 0, 0, 0, 0, 0], np.float32))
+            proposed.append(info["acting"]["proposed"])
+            sources.append(info["acting"]["source"])
+            if terminated:
+                break
+        assert proposed[0] == "final_approach" and sources[0] == "held"
+        assert info["acting"]["held_by"] == ("" if give_way else "arm_guard")
+        if give_way:
+            assert set(proposed[1:]) == {"policy"} and info["is_success"] and not info["collision"]
+        else:
+            assert set(proposed) == {"final_approach"} and set(sources) == {"held"}
+            assert info["distance"] == pytest.approx(0.06, abs=1e-3)
+    finally:
+        env.close()
+
+
 def _wall_past_the_goal(ee):  # an upright plate across the path 6.5 cm ahead: 3.5 cm past a goal 3 cm ahead
     return ObstacleSpec("box", (ee[0] + 0.065, ee[1], ee[2]), half_extents=(0.002, 0.05, 0.04))
 

@@ -280,6 +280,9 @@ def build_parser() -> argparse.ArgumentParser:
                            "UR5 0.1, KR16 0.2)")
     roll.add_argument("--no-turn", action="store_true",
                       help="the final approach never turns the tool towards its path (FinalApproach.turn)")
+    roll.add_argument("--give-way", action="store_true",
+                      help="the final approach leaves the goal to the policy once a veto held one of its steps "
+                           "(FinalApproach.give_way)")
     roll.add_argument("--stall-steps", type=int, default=FinalApproach.stall_steps,
                       help="step towards the goal once this many steps brought it less than 1 cm nearer "
                            "(default 0: off)")
@@ -745,7 +748,7 @@ def acting_from_args(args: argparse.Namespace):
     safety = SafetyLayer(args.workspace_guard, args.ray_shield, args.slide, args.memory_steps, args.arm_clearance,
                          guard_tool=not args.no_guard_tool, tool_clearance=args.tool_clearance)
     config = ActingConfig(final_approach=FinalApproach(args.final_approach_radius, stall_steps=args.stall_steps,
-                                                       turn=not args.no_turn),
+                                                       turn=not args.no_turn, give_way=args.give_way),
                           safety=safety, detour=Detour(stall_steps=args.detour_steps))
     off = LAYERS if args.policy_alone else [layer for layer in LAYERS if getattr(args, f"no_{layer}")]
     return config.without(*off)

@@ -86,7 +86,7 @@ class ActingEnv(gym.Wrapper):
         obs, reward, terminated, truncated, info = reach.advance(chosen.ik, taken)
         episode.memory.add(reach.perceive(), moved=taken)
         if info["goal_index"] != self._goal_index:
-            self._goal_index, episode.distances = info["goal_index"], []
+            self._goal_index, episode.distances, episode.refused = info["goal_index"], [], set()
         episode.distances.append(info["distance"])
         info["reward_terms"]["shielded"] = chosen.shaped
         held = not taken or np.array_equal(q_before, reach.q)

@@ -28,6 +28,8 @@ class FinalApproachStep(Component):
         self.approach = approach
 
     def propose(self, now: Perception, episode: Episode) -> Command | None:
+        if self.approach.give_way and self.name in episode.refused:
+            return None
         offset = now.goal_offset
         action = self.approach.action(offset, now.hits, now.tool_direction)
         if action is None:

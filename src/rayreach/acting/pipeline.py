@@ -70,6 +70,9 @@ class Episode:
     """Distance to the current goal after each step since it became current, m, oldest first."""
     step_scale: np.ndarray
     """Metres and radians per unit of action (6,)."""
+    refused: set[str] = field(default_factory=set)
+    """The sources (``Command.source`` as proposed) whose step a veto held, every shorter
+    share of it too, since the current goal became current."""
 
 
 class Component:
@@ -147,6 +150,8 @@ def choose(components: list[Component], episode: Episode, action: np.ndarray,
         ik, verdict, refused_by = attempt(command.delta * share)
         if verdict is Verdict.ALLOW:
             break
+    if verdict is not Verdict.ALLOW:
+        episode.refused.add(source)
     return Chosen(command, source, shaped, ik, verdict is Verdict.ALLOW, refused_by)
 
 
