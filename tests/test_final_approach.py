@@ -314,14 +314,16 @@ def test_env_steps_towards_the_goal_after_a_stall_and_not_before():
             env.close()
 
 
-def test_the_stall_window_starts_again_at_each_goal():
+def test_the_stall_window_and_the_refused_sources_start_again_at_each_goal():
     env = ActingEnv(ReachEnv(robot="ur5", scenario="exp2", goal_tolerance=0.3),
                     layers(final_approach=FinalApproach(stall_steps=2)))
     try:
         _, start = env.reset(seed=0)
         assert env._episode.distances == [start["distance"]]
+        env._episode.refused.add("final_approach")  # a held straight step before the goal switched
         _, _, _, _, info = env.step(np.zeros(6, np.float32))
         assert info["goal_index"] == 1 and env._episode.distances == [info["distance"]]
+        assert env._episode.refused == set()
     finally:
         env.close()
 

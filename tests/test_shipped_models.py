@@ -59,7 +59,7 @@ def test_shipped_policy_loads_with_metadata_and_runs_an_episode(robot, scenario)
                                                "tool_length": spec.tool.length, "tool_radius": spec.tool.radius,
                                                "axial_radius": radii.axial_radius,
                                                "axial_angle": FinalApproach.axial_angle,
-                                               "stall_steps": 0, "stall_gain": 0.01, "turn": True}
+                                               "stall_steps": 0, "stall_gain": 0.01, "turn": True, "give_way": False}
     assert record.config["detour"] == dataclasses.asdict(Detour())
     assert np.isfinite(record.ee_path).all()
 
