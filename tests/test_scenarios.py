@@ -457,6 +457,22 @@ def test_goal_cover_moves_away_over_the_goal(ur5_random_env):
         np.testing.assert_allclose(cover.position[:2], goal[:2])
 
 
+def test_a_cover_speed_slows_the_covers_alone_and_leaves_the_draws_in_step(ur5_random_env):
+    """The same seed draws the same world with the cover's speed from ``cover_speed``: a
+    training option must not shift which worlds a seed gives."""
+    base = _worlds_of_one_kind(ur5_random_env, "goal_cover")
+    slow = RandomWorlds(ur5_random_env.kin, ur5_random_env.scene,
+                        RandomWorldConfig(kinds=("goal_cover",), cover_speed=(0.03, 0.031)))
+    for seed in range(4):
+        (usual,), (slowed,) = (w.sample(np.random.default_rng(seed), 1)[0].obstacles for w in (base, slow))
+        speed = float(np.linalg.norm(slowed.velocity))
+        assert 0.03 <= speed <= 0.031
+        assert 0.05 <= float(np.linalg.norm(usual.velocity)) <= 0.2
+        assert slowed.position == usual.position
+        np.testing.assert_allclose(np.asarray(slowed.velocity) / speed,
+                                   np.asarray(usual.velocity) / np.linalg.norm(usual.velocity))
+
+
 def test_random_worlds_are_seeded(ur5_random_env):
     env = ur5_random_env
     env.reset(seed=5)

@@ -175,6 +175,8 @@ def test_exported_command_keeps_the_flags_a_resume_keeps():
         "--checkpoint-every 250000 --goal-sight [--resume]")
     covers = {**base, "recipe": "default", "extra_kinds": ["goal_cover", "goal_cover"]}
     assert train_command(covers, "RUN").endswith("--checkpoint-every 250000 --extra-kinds goal_cover,goal_cover [--resume]")
+    slow = {**base, "recipe": "default", "cover_speed": [0.03, 0.08]}
+    assert train_command(slow, "RUN").endswith("--checkpoint-every 250000 --cover-speed 0.03,0.08 [--resume]")
 
 
 # ---------------------------------------------------------------------- recipes and the batched path
@@ -417,3 +419,17 @@ def test_extra_kinds_are_drawn_beside_the_robots_and_survive_a_resume():
     assert config_from_meta(meta) == config
     with pytest.raises(ValueError, match="unknown obstacle kind.*lid.*known: plate, moving_plate"):
         recipe("default", extra_kinds=("lid",))
+
+
+def test_a_cover_speed_reaches_the_training_worlds_and_survives_a_resume():
+    from rayreach.learning.train import env_config
+
+    config = recipe("default", robot="ur5", cover_speed=(0.03, 0.08))
+    world = env_config(config).random_world
+    assert world.cover_speed == (0.03, 0.08) and world.speed == (0.05, 0.2)  # moving plates keep theirs
+    assert env_config(recipe("default", robot="ur5")).random_world.cover_speed is None
+    state = TrainState(AugmentedGoalSize(), ObstacleCurriculum())
+    meta = json.loads(json.dumps(bundle_meta(config, state, 0, "checkpoint", 142)))
+    assert config_from_meta(meta) == config
+    with pytest.raises(ValueError, match=r"cover_speed must be \(low, high\).*got \(0.2, 0.1\)"):
+        recipe("default", cover_speed=(0.2, 0.1))

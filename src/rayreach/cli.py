@@ -192,6 +192,9 @@ def build_parser() -> argparse.ArgumentParser:
     train.add_argument("--extra-kinds", default=None, metavar="KIND[,KIND...]",
                        help="obstacle kinds drawn beside the robot's training kinds, a kind listed again drawn more "
                             "often (e.g. goal_cover,goal_cover; '' for none; also changes a resumed run)")
+    train.add_argument("--cover-speed", default=None, metavar="LOW,HIGH",
+                       help="speed range, m/s, of the training worlds' goal covers (default: the suites' 0.05,0.2; "
+                            "also changes a resumed run)")
     train.add_argument("--target-kl", type=float, default=None, help="early-stop updates at this KL (0: never)")
     train.add_argument("--separate-features", action="store_true", help="actor and critic get their own extractor")
     train.add_argument("--obstacles", type=int, default=None,
@@ -605,6 +608,15 @@ def _bench_planners(args: argparse.Namespace) -> int:
     return 0
 
 
+def _speed_range(text: str) -> tuple[float, float]:
+    """``LOW,HIGH`` in m/s; ``RandomWorldConfig`` checks the bounds."""
+    try:
+        low, high = (float(v) for v in text.split(","))
+    except ValueError:
+        raise ValueError(f"a speed range is LOW,HIGH in m/s (e.g. 0.03,0.08), got {text!r}") from None
+    return low, high
+
+
 def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
     from dataclasses import replace
 
@@ -652,6 +664,8 @@ def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
             overrides[name] = getattr(args, name)
     if args.extra_kinds is not None:
         overrides["extra_kinds"] = tuple(k.strip() for k in args.extra_kinds.split(",") if k.strip())
+    if args.cover_speed is not None:
+        overrides["cover_speed"] = _speed_range(args.cover_speed)
     if args.obstacles is not None:
         overrides["obstacles"] = ObstacleParams(start=args.obstacles, minimum=args.obstacles, maximum=args.obstacles)
     if args.goal_size is not None:

@@ -53,6 +53,7 @@ VARIANTS: dict[str, tuple[str, dict[str, Any]]] = {
     "collision-20": ("default", {"collision_weight": -20.0}),
     "collision-40": ("default", {"collision_weight": -40.0}),
     "more-covers": ("default", {"extra_kinds": ("goal_cover", "goal_cover")}),
+    "slow-covers": ("default", {"cover_speed": (0.03, 0.08)}),
     "separate-features": ("default", {"share_features": False}),
     "wide": ("default", {"features": (512, 512)}),
     "decide-1": ("default", {"decision_period": 1}),

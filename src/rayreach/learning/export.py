@@ -40,6 +40,8 @@ def train_command(config: dict, out: str | Path) -> str:
         command += f" --decision-period {period}"
     if config.get("extra_kinds"):
         command += f" --extra-kinds {','.join(config['extra_kinds'])}"
+    if config.get("cover_speed"):
+        command += f" --cover-speed {','.join(f'{v:g}' for v in config['cover_speed'])}"
     every = config.get("validate_every")  # None: saved before runs validated (validating changes no weights)
     if every is not None and usual is not None and every != usual.validate_every:
         command += f" --validate-every {every}"

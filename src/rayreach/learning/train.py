@@ -152,6 +152,9 @@ class TrainConfig:
     """Obstacle kinds drawn beside the robot's ``training_kinds``
     (``rayreach.scenarios.random_world.KINDS``; not in the paper): a kind listed again is
     drawn more often in training. The evaluation suites keep the robot's own kinds."""
+    cover_speed: tuple[float, float] | None = None
+    """Speed range, m/s, of the training worlds' goal covers (``RandomWorldConfig.cover_speed``;
+    not in the paper); None: the suites' 0.05-0.2 m/s. The evaluation suites keep theirs."""
     observation: ObservationConfig = ObservationConfig.planner()
     """What the policy sees beyond the paper's 142 values (``rayreach.env.observation``; not in
     the paper): the goal's direction, the workspace's walls, its own motion and three ray
@@ -200,6 +203,10 @@ class TrainConfig:
             from rayreach.scenarios.random_world import check_kinds
 
             check_kinds(self.extra_kinds, " in extra_kinds")
+        if self.cover_speed is not None:
+            from rayreach.scenarios.random_world import RandomWorldConfig
+
+            RandomWorldConfig(cover_speed=self.cover_speed)  # checks the bounds
         if self.lr_schedule not in LR_SCHEDULES:
             raise ValueError(f"lr_schedule must be one of {', '.join(LR_SCHEDULES)}; "
                              f"got {self.lr_schedule!r}")
@@ -288,7 +295,8 @@ def env_config(config: TrainConfig):
         rewards=replace(RewardWeights(), collision=config.collision_weight, progress=config.progress_weight,
                         proximity=config.proximity_weight,
                         shielded=config.shield_weight, progress_around_obstacles=config.progress_around_obstacles),
-        random_world=RandomWorldConfig(n_obstacles=config.obstacles.start, kinds=training_kinds(config)),
+        random_world=RandomWorldConfig(n_obstacles=config.obstacles.start, kinds=training_kinds(config),
+                                       cover_speed=config.cover_speed),
         observation=config.observation,
     )
 
@@ -738,6 +746,8 @@ def config_from_meta(meta: dict[str, Any]) -> TrainConfig:
     data["features"] = tuple(data["features"])
     data["heads"] = tuple(data["heads"])
     data["extra_kinds"] = tuple(data["extra_kinds"])
+    if data["cover_speed"] is not None:
+        data["cover_speed"] = tuple(data["cover_speed"])
     return TrainConfig(**data)
 
 

@@ -67,6 +67,9 @@ class RandomWorldConfig:
     """Start and goal keep this far inside the workspace bounds, m."""
     speed: tuple[float, float] = (0.05, 0.2)
     """Speed range of moving plates, m/s."""
+    cover_speed: tuple[float, float] | None = None
+    """Speed range of goal covers, m/s; None: ``speed``. A slower cover takes longer to clear
+    the goal, so diving under it fails more often (a training option, docs/training.md)."""
     start_clearance: float = 0.0
     """Least distance, m, between the robot at its start and every obstacle at t = 0; 0: the
     start need only be free of collision. The authors' generator kept obstacles 5 cm from the
@@ -75,6 +78,10 @@ class RandomWorldConfig:
     max_tries: int = 200
 
     def __post_init__(self) -> None:
+        for name in ("speed", "cover_speed"):
+            bounds = getattr(self, name)
+            if bounds is not None and not (len(bounds) == 2 and 0 <= bounds[0] <= bounds[1]):
+                raise ValueError(f"{name} must be (low, high) m/s with 0 <= low <= high, got {bounds}")
         if not self.start_clearance >= 0:
             raise ValueError(f"start_clearance must be >= 0 (0 = off), got {self.start_clearance}")
 
@@ -251,7 +258,7 @@ class RandomWorlds:
             # down-pointing tool must be, unseen by every ray (docs/training.md).
             lift = float(rng.uniform(0.04, 0.07))
             direction = float(rng.uniform(0, 2 * math.pi))
-            speed = float(rng.uniform(*self.config.speed))
+            speed = float(rng.uniform(*(self.config.cover_speed or self.config.speed)))
             return ObstacleSpec("box", (float(goal[0]), float(goal[1]), float(goal[2]) + lift),
                                 half_extents=(0.05 * scale, 0.05 * scale, 0.002),
                                 velocity=(speed * math.cos(direction), speed * math.sin(direction), 0.0),
