@@ -33,7 +33,8 @@ def test_variants_change_one_thing_of_their_recipe():
     assert COMPARE_VARIANTS == tuple(VARIANTS)  # the CLI names them without importing torch
     default = recipe("default", robot="kr16")
     for name in ("paper-observation", "no-scans", "long-scans", "sightings", "no-workspace", "entropy", "around-obstacles", "proximity",
-                 "collision-20", "collision-40", "separate-features", "wide", "decide-1", "decide-2", "decide-8"):
+                 "collision-20", "collision-40", "slow-covers", "separate-features", "wide", "decide-1", "decide-2",
+                 "decide-8"):
         changed = [f.name for f in fields(default) if getattr(variant(name, "kr16"), f.name) != getattr(default, f.name)]
         assert len(changed) == 1, (name, changed)
     long = variant("long-scans", "ur5").observation  # four scans reaching 96 steps back

@@ -15,10 +15,9 @@ EVAL_PLANNERS = "drl,rrt,ncrrt,ompl-rrt,ompl-rrtconnect"
 TRAIN_RECIPES = ("default", "baseline", "paper")
 """``rayreach.learning.train.RECIPES``' names (that module imports torch's stack)."""
 COMPARE_VARIANTS = ("baseline", "default", "paper", "paper-observation", "no-scans", "long-scans", "sightings",
-                    "no-workspace", "entropy",
-                    "around-obstacles", "proximity", "gamma-0.995", "gamma-0.998",
-                    "tip-back", "no-tip-back", "collision-20", "collision-40", "more-covers", "separate-features", "wide",
-                    "decide-1", "decide-2", "decide-8", "slanted", "slanted-no-tip-back",
+                    "no-workspace", "entropy", "around-obstacles", "proximity", "gamma-0.995", "gamma-0.998",
+                    "tip-back", "no-tip-back", "collision-20", "collision-40", "more-covers", "slow-covers",
+                    "separate-features", "wide", "decide-1", "decide-2", "decide-8", "slanted", "slanted-no-tip-back",
                     "goal-sight")
 """``rayreach.evaluate.compare_recipes.VARIANTS``' names."""
 ROBOT_HELP = " or ".join(ROBOTS)
