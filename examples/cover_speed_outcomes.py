@@ -29,8 +29,6 @@ from rayreach.evaluate.rollout import rollout_batched  # noqa: E402
 from rayreach.learning.policy import load_policy  # noqa: E402
 from rayreach.planners.drl import resolve_model  # noqa: E402
 
-VALIDATION = 1_000_000
-"""The validation split's first seed."""
 BINS = np.linspace(0.05, 0.2, 5)
 """Edges of the speed bins, m/s: the suites' range in four."""
 
@@ -67,7 +65,7 @@ def main() -> None:
     fig, ax = plt.subplots(figsize=(6.5, 4))
     speeds = None
     for model in models:
-        summary = rollout_batched(model, episodes=args.episodes, n_obstacles=args.obstacles, seed=VALIDATION)
+        summary = rollout_batched(model, episodes=args.episodes, n_obstacles=args.obstacles, split="validation")
         if speeds is None:
             speeds = slowest_covers(load_policy(model).robot, [r["seed"] for r in summary.per_episode],
                                     args.obstacles)
