@@ -12,8 +12,12 @@ import numpy as np
 import pybullet as p
 import pytest
 
-from rayreach.learning.demonstrations import ShelfExpert, SlotExpert, horizontal_reach, top_of
+from rayreach.learning.demonstrations import (CoverExpert, ShelfExpert, SlotExpert, bottom_of, horizontal_gap,
+                                              horizontal_reach, top_of)
+from rayreach.env.decisions import HeldAction
 from rayreach.env.reach import ReachEnv
+from rayreach.robots import get_robot
+from rayreach.scenarios.random_world import RandomWorldConfig
 from rayreach.learning.bundles import read_bundle_meta
 
 
@@ -117,6 +121,61 @@ def test_slot_expert_reaches_both_goals_of_exp2_without_touching_a_plate():
         assert env.steps < 300
     finally:
         env.close()
+
+
+def _cover_world() -> ReachEnv:
+    return ReachEnv(robot="ur5", scenario="random", goal_tolerance=0.01,
+                    random_world=RandomWorldConfig(n_obstacles=1, kinds=("goal_cover",)))
+
+
+def test_a_moving_covers_gap_and_bottom_agree_with_pybullet_bounding_boxes():
+    env = _cover_world()
+    try:
+        env.reset(seed=3)
+        (cover,), (body,) = env.scenario.obstacles, env.scene._obstacle_ids
+        goal = env.goals[0]
+        for t in (0.0, 0.5, 1.5):
+            env.scene.set_time(t)
+            low, high = p.getAABB(body, physicsClientId=env.scene.client)
+            outside = np.maximum(np.maximum(np.array(low[:2]) - goal[:2], goal[:2] - np.array(high[:2])), 0.0)
+            assert horizontal_gap(cover, goal, t) == pytest.approx(np.linalg.norm(outside), abs=1e-6)
+            assert bottom_of(cover) == pytest.approx(low[2], abs=1e-6)
+        assert horizontal_gap(cover, goal, 0.0) == 0.0 and horizontal_gap(cover, goal, 1.5) > 0.0  # it moves off
+    finally:
+        env.close()
+
+
+@pytest.mark.parametrize("period", [1, 4])
+def test_cover_expert_waits_for_the_cover_where_diving_collides(period):
+    """Goals under a plate that moves away: the cover expert reaches every one it accepts
+    without touching the plate (PyBullet's closest points at every step), arriving after the
+    plate has cleared the goal; the slot expert, the same way in without the wait, hits the
+    plate in most of them. Actions held ``period`` control steps."""
+    spec = get_robot("ur5")
+    cover_expert = CoverExpert(ee_step=spec.ee_step * period, rot_step=spec.rot_step * period)
+    experts = {"cover": cover_expert, "slot": SlotExpert(ee_step=spec.ee_step * period, rot_step=spec.rot_step * period)}
+    base = _cover_world()
+    env = HeldAction(base, period)
+    outcomes: dict[str, list[tuple[bool, bool, float]]] = {"cover": [], "slot": []}
+    try:
+        for seed in range(12):
+            for name, expert in experts.items():
+                obs, info = env.reset(seed=seed)
+                if not cover_expert.accepts(base):
+                    break
+                done, clearance = False, np.inf
+                while not done:
+                    obs, _, terminated, truncated, info = env.step(expert.label(obs, base))
+                    done = terminated or truncated
+                    clearance = min(clearance, _clearance(base.scene))
+                (cover,) = base.scenario.obstacles
+                gap = horizontal_gap(cover, base.goals[0], base.time)
+                outcomes[name].append((bool(info["is_success"]) and clearance > 0.0, bool(info["collision"]), gap))
+    finally:
+        env.close()
+    assert len(outcomes["cover"]) >= 6
+    assert all(clean and gap >= cover_expert.gap for clean, _, gap in outcomes["cover"])
+    assert sum(collision for _, collision, _ in outcomes["slot"]) > len(outcomes["slot"]) / 2
 
 
 def test_clone_keeps_the_step_count_and_adds_its_time(tmp_path):

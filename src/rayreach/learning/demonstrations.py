@@ -25,6 +25,7 @@ from rayreach.learning.bundles import CheckpointError, Normalization, read_bundl
 
 
 from rayreach.learning.policy import Policy
+from rayreach.env.decisions import HeldAction
 from rayreach.env.episode import run_episode
 from rayreach.learning.train import CHECKPOINT
 from rayreach.sim.transforms import rpy_to_matrix
@@ -132,6 +133,44 @@ class SlotExpert:
         return self.action(obs, env.ee_rot[:, 2], height, self.crossing_height(env), self.reach(env))
 
 
+@dataclass(frozen=True)
+class CoverExpert(SlotExpert):
+    """The slot expert's way onto the goal, waiting where a moving obstacle lies over it: the
+    tool hovers at crossing height above the goal until nothing over the goal is within
+    ``gap`` of it horizontally, then descends. A goal under a plate that moves away (exp3)
+    is reached once the plate has gone by, not by diving under it as it leaves."""
+
+    gap: float = 0.03
+    """Horizontal distance, m, every obstacle over the goal must keep from it before the
+    tool descends: the tool's radius and a margin."""
+    least_clearance: float = 0.015
+    """Under a low ceiling the tool crosses lower than ``clearance``, down to this far over
+    the highest obstacle, m."""
+
+    def crossing_height(self, env: Any) -> float:
+        ceiling = env.scenario.workspace_high[2] - self.ceiling_margin
+        return min(super().crossing_height(env), ceiling)
+
+    def accepts(self, env: Any) -> bool:
+        return self.crossing_height(env) >= super().crossing_height(env) - self.clearance + self.least_clearance
+
+    def covered(self, env: Any) -> bool:
+        """Whether an obstacle over the goal (its lowest point above the goal) lies within
+        ``gap`` of it horizontally at the env's time."""
+        goal = env.goals[env.goal_index]
+        return any(bottom_of(o) > goal[2] and horizontal_gap(o, goal, env.time) < self.gap
+                   for o in env.scenario.obstacles)
+
+    def label(self, obs: np.ndarray, env: Any) -> np.ndarray:
+        height = float(env.ee_pos[2])
+        crossing = self.crossing_height(env)
+        if not self.covered(env):
+            return self.action(obs, env.ee_rot[:, 2], height, crossing, self.reach(env))
+        hover = np.array(obs, dtype=float)  # aims over the goal, at the crossing height
+        hover[8] = crossing - height
+        return self.action(hover, env.ee_rot[:, 2], height, crossing, self.reach(env))
+
+
 def _corners(obstacle: Any) -> np.ndarray:
     """The eight corners of a box (world frame, at its start position)."""
     signs = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], dtype=float)
@@ -146,6 +185,28 @@ def top_of(obstacle: Any) -> float:
     return float(_corners(obstacle)[:, 2].max())
 
 
+def bottom_of(obstacle: Any) -> float:
+    """Lowest z of a box or sphere (moving ones move horizontally only)."""
+    if obstacle.shape == "sphere":
+        return float(obstacle.position[2]) - float(obstacle.radius)
+    return float(_corners(obstacle)[:, 2].min())
+
+
+def horizontal_gap(obstacle: Any, point: np.ndarray, t: float = 0.0) -> float:
+    """Horizontal distance from ``point`` to a box's footprint or a sphere at time ``t`` (0
+    where the point lies under or over it). A box is taken by its yaw; a tilted box's
+    footprint is larger than the rectangle this measures."""
+    centre = np.asarray(obstacle.position_at(t), dtype=float)
+    if obstacle.shape == "sphere":
+        return max(float(np.linalg.norm(centre[:2] - point[:2])) - float(obstacle.radius), 0.0)
+    yaw = float(obstacle.rpy[2])
+    offset = point[:2] - centre[:2]
+    local = np.array([np.cos(yaw) * offset[0] + np.sin(yaw) * offset[1],
+                      -np.sin(yaw) * offset[0] + np.cos(yaw) * offset[1]])
+    outside = np.maximum(np.abs(local) - np.asarray(obstacle.half_extents[:2]), 0.0)
+    return float(np.linalg.norm(outside))
+
+
 def horizontal_reach(obstacle: Any, point: np.ndarray) -> float:
     """Farthest horizontal distance from ``point`` to a box or sphere at its start position."""
     if obstacle.shape == "sphere":
@@ -158,7 +219,7 @@ def _action(offset: np.ndarray, turn: np.ndarray, ee_step: float, rot_step: floa
     return np.clip(action, -1.0, 1.0).astype(np.float32)
 
 
-EXPERTS: dict[str, Callable[..., Expert]] = {"shelf": ShelfExpert, "goal_slot": SlotExpert}
+EXPERTS: dict[str, Callable[..., Expert]] = {"shelf": ShelfExpert, "goal_slot": SlotExpert, "goal_cover": CoverExpert}
 """The world kinds (``random_world.KINDS``) that have a scripted expert."""
 
 
@@ -252,8 +313,9 @@ def clone_into_checkpoint(run: str | Path, kind: str, config: CloneConfig = Clon
     torch.manual_seed(config.seed)
     model = PPO.load(str(checkpoint), device="cpu")
     policy = model.policy
-    expert: Expert = EXPERTS[kind](ee_step=spec.ee_step, rot_step=spec.rot_step)
     actor = Policy(model, normalize, meta, checkpoint)
+    period = actor.decision_period  # an action is held this many control steps: the expert's step is that long
+    expert: Expert = EXPERTS[kind](ee_step=spec.ee_step * period, rot_step=spec.rot_step * period)
 
     def actor_mean(raw: np.ndarray) -> torch.Tensor:
         return policy.get_distribution(torch.as_tensor(normalize(raw))).distribution.mean
@@ -262,10 +324,12 @@ def clone_into_checkpoint(run: str | Path, kind: str, config: CloneConfig = Clon
     goal_size = float(meta["state"]["goal"]["size"])
     others = tuple(k for k in spec.training_kinds if k != kind)
     anchor_tolerance = goal_size if config.anchor_tolerance is None else config.anchor_tolerance
-    anchor_env = _acting(_world_env(robot, n_obstacles, others, anchor_tolerance, actor.observation))
-    expert_env = _world_env(robot, 1, (kind,), float(meta["config"]["goal"]["rho_min"]),  # the true task
-                            actor.observation)
-    acting_expert_env = _acting(expert_env)
+    anchor_env = HeldAction(_acting(_world_env(robot, n_obstacles, others, anchor_tolerance, actor.observation)),
+                            period)
+    expert_world = _world_env(robot, 1, (kind,), float(meta["config"]["goal"]["rho_min"]),  # the true task
+                              actor.observation)
+    expert_env = HeldAction(expert_world, period)
+    acting_expert_env = HeldAction(_acting(expert_world), period)
     try:
         anchor_obs, _, anchor_before = _play(anchor_env, actor.act, lambda o, e: o, config.anchor_episodes,
                                              config.seed + 10_000, "anchor", progress)
@@ -279,7 +343,7 @@ def clone_into_checkpoint(run: str | Path, kind: str, config: CloneConfig = Clon
         rounds = []
         # the DAgger rounds follow the expert or the actor alone, in the paper's environment
         for r in range(config.rounds):
-            follow = (lambda o: expert.label(o, expert_env)) if r == 0 else actor.act
+            follow = (lambda o: expert.label(o, expert_world)) if r == 0 else actor.act
             obs, labels, outcome = _play(expert_env, follow, expert.label, config.episodes,
                                          config.seed + 1_000 * r, f"round {r + 1}", progress, expert.accepts)
             expert_obs += obs
