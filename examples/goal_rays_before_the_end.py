@@ -28,9 +28,10 @@ from rayreach.env.reach import EnvConfig, episode_outcome  # noqa: E402
 from rayreach.learning.policy import load_policy  # noqa: E402
 from rayreach.planners.drl import resolve_model  # noqa: E402
 from rayreach.scenarios.random_world import RandomWorldConfig  # noqa: E402
+from rayreach.scenarios.splits import get_split  # noqa: E402
 from rayreach.scenarios.suites import suite_kinds  # noqa: E402
 
-VALIDATION = 1_000_000
+VALIDATION = get_split("validation").start
 """The validation split's first seed."""
 LAST = 40
 """Control steps before the end that count as its approach (10 decisions of 4)."""

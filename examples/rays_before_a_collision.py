@@ -27,9 +27,10 @@ from rayreach.env.reach import ReachEnv  # noqa: E402
 from rayreach.learning.policy import load_policy  # noqa: E402
 from rayreach.planners.drl import resolve_model  # noqa: E402
 from rayreach.scenarios.random_world import KINDS, RandomWorldConfig  # noqa: E402
+from rayreach.scenarios.splits import get_split  # noqa: E402
 from rayreach.sim.sensors import EXTRA_RAYS, SENSOR_SLICES, RayModel  # noqa: E402
 
-VALIDATION = 1_000_000
+VALIDATION = get_split("validation").start
 """The validation split's first seed."""
 
 

@@ -24,8 +24,9 @@ from rayreach.env.reach import ReachEnv  # noqa: E402
 from rayreach.learning.policy import load_policy  # noqa: E402
 from rayreach.planners.drl import resolve_model  # noqa: E402
 from rayreach.scenarios.random_world import RandomWorldConfig  # noqa: E402
+from rayreach.scenarios.splits import get_split  # noqa: E402
 
-VALIDATION = 1_000_000
+VALIDATION = get_split("validation").start
 """The validation split's first seed."""
 
 
