@@ -12,11 +12,12 @@ import numpy as np
 import pybullet as p
 import pytest
 
-from rayreach.learning.demonstrations import (CoverExpert, ShelfExpert, SlotExpert, bottom_of, horizontal_gap,
-                                              horizontal_reach, top_of)
+from rayreach.learning.demonstrations import (CoverExpert, ShelfExpert, SlotExpert, bottom_of, clonable_kinds,
+                                              horizontal_gap, horizontal_reach, top_of)
 from rayreach.env.decisions import HeldAction
 from rayreach.env.reach import ReachEnv
 from rayreach.robots import get_robot
+from rayreach.scenarios.broad_world import broad_kinds
 from rayreach.scenarios.random_world import RandomWorldConfig
 from rayreach.learning.bundles import read_bundle_meta
 
@@ -44,6 +45,17 @@ def _clearance(scene) -> float:
     points = [point[8] for body in scene._obstacle_ids
               for point in p.getClosestPoints(scene.robot, body, 0.05, physicsClientId=scene.client)]
     return min(points, default=np.inf)
+
+
+def _follow(env, base: ReachEnv, expert, obs: np.ndarray) -> tuple[dict, float]:
+    """Step ``env`` (``base`` inside it) by ``expert``'s labels from ``obs`` to the episode's
+    end: its last info and the least clearance on the way, by PyBullet's closest points."""
+    done, clearance, info = False, np.inf, {}
+    while not done:
+        obs, _, terminated, truncated, info = env.step(expert.label(obs, base))
+        done = terminated or truncated
+        clearance = min(clearance, _clearance(base.scene))
+    return info, clearance
 
 
 @pytest.mark.parametrize("name", ["exp4", "exp5", "exp6", "exp7"])
@@ -111,11 +123,7 @@ def test_slot_expert_reaches_both_goals_of_exp2_without_touching_a_plate():
     expert = SlotExpert()
     try:
         obs, info = env.reset(seed=0)
-        done, clearance = False, np.inf
-        while not done:
-            obs, _, terminated, truncated, info = env.step(expert.label(obs, env))
-            done = terminated or truncated
-            clearance = min(clearance, _clearance(env.scene))
+        info, clearance = _follow(env, env, expert, obs)
         assert info["is_success"] and not info["collision"] and info["goal_index"] == 1
         assert clearance > 0.0
         assert env.steps < 300
@@ -163,11 +171,7 @@ def test_cover_expert_waits_for_the_cover_where_diving_collides(period):
                 obs, info = env.reset(seed=seed)
                 if not cover_expert.accepts(base):
                     break
-                done, clearance = False, np.inf
-                while not done:
-                    obs, _, terminated, truncated, info = env.step(expert.label(obs, base))
-                    done = terminated or truncated
-                    clearance = min(clearance, _clearance(base.scene))
+                info, clearance = _follow(env, base, expert, obs)
                 (cover,) = base.scenario.obstacles
                 gap = horizontal_gap(cover, base.goals[0], base.time)
                 outcomes[name].append((bool(info["is_success"]) and clearance > 0.0, bool(info["collision"]), gap))
@@ -207,3 +211,72 @@ def test_clone_keeps_the_step_count_and_adds_its_time(tmp_path):
     no_slots = subprocess.run([*rayreach, "clone", "--run", str(out), "--kind", "goal_slot"], capture_output=True,
                               text=True, timeout=60)
     assert no_slots.returncode == 2 and "does not train on 'goal_slot'" in no_slots.stderr and "shelf" in no_slots.stderr
+
+
+def test_kinds_with_an_expert_follow_the_robot_and_the_suite():
+    assert clonable_kinds("ur5", "random") == ("goal_cover", "goal_slot")
+    assert clonable_kinds("kr16", "random") == ("shelf",)
+    assert clonable_kinds("ur5", "broad") == clonable_kinds("kr16", "broad") == ("shelf", "goal_box")
+
+
+def _broad_outcomes(expert_for, kind: str, worlds: int) -> list[bool]:
+    """Whether ``expert_for(env)`` reaches the goal without a touch (PyBullet closest points)
+    in each of the first ``worlds`` broad UR5 worlds whose goal scene is ``kind`` and which it
+    accepts, actions held 4 control steps."""
+    spec = get_robot("ur5")
+    base = ReachEnv(robot="ur5", scenario="broad", goal_tolerance=0.01, random_world=RandomWorldConfig(n_obstacles=1))
+    env = HeldAction(base, 4)
+    outcomes: list[bool] = []
+    try:
+        seed = 1_000_000
+        while len(outcomes) < worlds:
+            obs, _ = env.reset(seed=seed)
+            seed += 1
+            expert = expert_for(spec, base)
+            if broad_kinds(base.scenario) != [kind] or not expert.accepts(base):
+                continue
+            info, clearance = _follow(env, base, expert, obs)
+            outcomes.append(bool(info["is_success"]) and clearance > 0.0)
+    finally:
+        env.close()
+    return outcomes
+
+
+def test_shelf_expert_enters_broad_shelves_by_their_own_face():
+    """A broad world's shelf faces the base from wherever it stands: the expert goes in along
+    the shelf's own +y, turned by its yaw; held to the random worlds' +y it fails them."""
+    def turned(spec, env):
+        return ShelfExpert(ee_step=spec.ee_step * 4, rot_step=spec.rot_step * 4)
+
+    def fixed(spec, env):
+        return ShelfExpert(direction=(0.0, 1.0, 0.0), ee_step=spec.ee_step * 4, rot_step=spec.rot_step * 4)
+
+    by_own_face = _broad_outcomes(turned, "shelf", 8)
+    assert sum(by_own_face) >= 5
+    assert sum(_broad_outcomes(fixed, "shelf", 8)) < sum(by_own_face)
+
+
+def test_slot_expert_descends_into_broad_goal_boxes():
+    def slot(spec, env):
+        return SlotExpert(ee_step=spec.ee_step * 4, rot_step=spec.rot_step * 4)
+
+    assert sum(_broad_outcomes(slot, "goal_box", 8)) >= 5
+
+
+def test_clone_into_a_broad_run_plays_the_goal_scene_of_its_kind(tmp_path):
+    """A run in broad worlds clones the expert of one of the broad suite's goal scenes and
+    says so in its report; the random worlds' kinds are refused, naming those it has."""
+    from dataclasses import replace
+
+    from rayreach.learning.demonstrations import CloneConfig, clone_into_checkpoint
+    from rayreach.learning.train import TrainConfig, train, with_envs
+
+    out = tmp_path / "broad"
+    train(replace(with_envs(TrainConfig(), 4), workers=1, max_episode_steps=32, timesteps=256, suite="broad",
+                  checkpoint_every=256), out)
+    report = clone_into_checkpoint(out, "goal_box", CloneConfig(episodes=2, rounds=1, anchor_episodes=1,
+                                                                eval_episodes=1), progress=False)
+    assert report["suite"] == "broad" and report["kind"] == "goal_box"
+    assert report["rounds"][0]["followed"] == "expert" and report["rounds"][0]["samples"] > 0
+    with pytest.raises(ValueError, match="its kinds with an expert: shelf, goal_box"):
+        clone_into_checkpoint(out, "goal_cover", CloneConfig(episodes=1), progress=False)

@@ -328,7 +328,7 @@ def build_parser() -> argparse.ArgumentParser:
     clone = sub.add_parser("clone", help="fit a run's checkpoint to a scripted expert's demonstrations")
     clone.add_argument("--run", required=True, help="run directory holding checkpoint.zip")
     clone.add_argument("--kind", required=True, choices=EXPERTS,
-                       help="the world kind whose expert to clone: shelf (KR16), goal_slot or goal_cover (UR5)")
+                       help="the world kind whose expert to clone: shelf (KR16; broad runs), goal_slot or goal_cover (UR5), goal_box (broad runs)")
     clone.add_argument("--episodes", type=int, default=CloneConfig.episodes, help="expert-world episodes per round")
     clone.add_argument("--rounds", type=int, default=CloneConfig.rounds)
     clone.add_argument("--anchor-episodes", type=int, default=CloneConfig.anchor_episodes,

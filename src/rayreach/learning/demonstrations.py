@@ -28,6 +28,8 @@ from rayreach.learning.policy import Policy
 from rayreach.env.decisions import HeldAction
 from rayreach.env.episode import run_episode
 from rayreach.learning.train import CHECKPOINT
+from rayreach.scenarios import RANDOM
+from rayreach.scenarios.suites import suite_kinds
 from rayreach.sim.transforms import rpy_to_matrix
 
 
@@ -49,8 +51,10 @@ class ShelfExpert:
     """Levels the tool along ``direction``, centres it on the goal across that direction, then
     moves straight in: the way a compartment is entered without touching its edges."""
 
-    direction: tuple[float, float, float] = (0.0, 1.0, 0.0)
-    """Into the shelf (exp4..exp7 and the random shelves open towards -y, facing the robot)."""
+    direction: tuple[float, float, float] | None = None
+    """Into the shelf; None: +y turned by the yaw of the world's first obstacle, a board of
+    the shelf (exp4..exp7 and the random shelves open towards -y, facing the robot; a broad
+    world's shelf faces the robot's base from wherever it stands)."""
     position_tolerance: float = 0.003
     """Lateral offset, m, below which the tool may advance."""
     angle_tolerance: float = 0.02
@@ -61,11 +65,13 @@ class ShelfExpert:
     ee_step: float = 0.005
     rot_step: float = 0.005
 
-    def action(self, obs: np.ndarray, tool_axis: np.ndarray, approach: float = 0.0) -> np.ndarray:
+    def action(self, obs: np.ndarray, tool_axis: np.ndarray, approach: float = 0.0,
+               into: np.ndarray | None = None) -> np.ndarray:
         """``obs`` as ``ReachEnv`` gives it (goal offset at 6:9); ``tool_axis``: the tool's
         pointing direction (its z axis) in the world frame; ``approach``: how far, m, the tip
-        may advance before it is levelled and centred (see ``label``)."""
-        along = np.asarray(self.direction, dtype=float)
+        may advance before it is levelled and centred (see ``label``); ``into``: the way into
+        the shelf (default ``direction``, else +y)."""
+        along = np.asarray(into if into is not None else self.direction or (0.0, 1.0, 0.0), dtype=float)
         offset = np.asarray(obs[6:9], dtype=float)
         turn = np.cross(tool_axis, along)  # rotation vector that turns the tool onto ``along``
         ahead = float(offset @ along)
@@ -77,11 +83,18 @@ class ShelfExpert:
     def accepts(self, env: Any) -> bool:
         return True
 
+    def into(self, env: Any) -> np.ndarray:
+        """The way into the shelf of ``env``'s world (see ``direction``)."""
+        if self.direction is not None:
+            return np.asarray(self.direction, dtype=float)
+        yaw = float(env.scenario.obstacles[0].rpy[2])
+        return np.array([-np.sin(yaw), np.cos(yaw), 0.0])
+
     def label(self, obs: np.ndarray, env: Any) -> np.ndarray:
-        along = np.asarray(self.direction, dtype=float)
+        along = self.into(env)
         front = min(float((_corners(o) @ along).min()) for o in env.scenario.obstacles)
         approach = front - self.standoff - float(env.ee_pos @ along)
-        return self.action(obs, env.ee_rot[:, 2], approach)
+        return self.action(obs, env.ee_rot[:, 2], approach, along)
 
 
 @dataclass(frozen=True)
@@ -219,8 +232,11 @@ def _action(offset: np.ndarray, turn: np.ndarray, ee_step: float, rot_step: floa
     return np.clip(action, -1.0, 1.0).astype(np.float32)
 
 
-EXPERTS: dict[str, Callable[..., Expert]] = {"shelf": ShelfExpert, "goal_slot": SlotExpert, "goal_cover": CoverExpert}
-"""The world kinds (``random_world.KINDS``) that have a scripted expert."""
+EXPERTS: dict[str, Callable[..., Expert]] = {"shelf": ShelfExpert, "goal_slot": SlotExpert, "goal_cover": CoverExpert,
+                                              "goal_box": SlotExpert}
+"""The world kinds (``random_world.KINDS``, and the goal scenes of the broad suite,
+``broad_world.GOAL_KINDS``) that have a scripted expert. Into an open box the slot expert's
+way serves: over the rim, then straight down."""
 
 
 @dataclass(frozen=True)
@@ -242,14 +258,26 @@ class CloneConfig:
     seed: int = 0
 
 
-def _world_env(robot: str, n_obstacles: int, kinds: tuple[str, ...], goal_tolerance: float, observation):
-    """A random-world environment of ``kinds`` with the actor's observation: the paper's
-    environment, for the expert and the DAgger rounds."""
+def _world_env(robot: str, suite: str, n_obstacles: int, kinds: tuple[str, ...], goal_tolerance: float, observation):
+    """Drawn worlds of ``suite`` with the actor's observation: the paper's environment, for
+    the expert and the DAgger rounds. Random worlds are of ``kinds``; broad worlds draw their
+    own, and ``_play``'s ``accepts`` picks those of a goal scene."""
     from rayreach.env.reach import ReachEnv
     from rayreach.scenarios.random_world import RandomWorldConfig
 
-    return ReachEnv(robot=robot, scenario="random", goal_tolerance=goal_tolerance,
-                    random_world=RandomWorldConfig(n_obstacles=n_obstacles, kinds=kinds), observation=observation)
+    random_kinds = kinds if suite == RANDOM else None
+    return ReachEnv(robot=robot, scenario=suite, goal_tolerance=goal_tolerance,
+                    random_world=RandomWorldConfig(n_obstacles=n_obstacles, kinds=random_kinds), observation=observation)
+
+
+def clonable_kinds(robot: str, suite: str) -> tuple[str, ...]:
+    """The world kinds with an expert (``EXPERTS``) that a run of ``robot`` in ``suite``
+    trains on: its random-world kinds, or the broad suite's goal scenes."""
+    from rayreach.robots import get_robot
+    from rayreach.scenarios.broad_world import GOAL_KINDS
+
+    trained = get_robot(robot).training_kinds if suite == RANDOM else GOAL_KINDS
+    return tuple(k for k in dict.fromkeys(trained) if k in EXPERTS)
 
 
 def _acting(env):
@@ -307,9 +335,11 @@ def clone_into_checkpoint(run: str | Path, kind: str, config: CloneConfig = Clon
     spec = get_robot(robot)
     if kind not in EXPERTS:
         raise ValueError(f"no expert for world kind '{kind}'; known: {', '.join(EXPERTS)}")
-    if kind not in spec.training_kinds:
-        kinds = ", ".join(dict.fromkeys(spec.training_kinds))
-        raise ValueError(f"robot '{robot}' does not train on '{kind}' worlds; its kinds: {kinds}")
+    suite = str(meta.get("config", {}).get("suite", RANDOM))
+    if kind not in clonable_kinds(robot, suite):
+        kinds = ", ".join(clonable_kinds(robot, suite))
+        raise ValueError(f"robot '{robot}' does not train on '{kind}' worlds in the {suite} suite; "
+                         f"its kinds with an expert: {kinds}")
     torch.manual_seed(config.seed)
     model = PPO.load(str(checkpoint), device="cpu")
     policy = model.policy
@@ -324,19 +354,25 @@ def clone_into_checkpoint(run: str | Path, kind: str, config: CloneConfig = Clon
     goal_size = float(meta["state"]["goal"]["size"])
     others = tuple(k for k in spec.training_kinds if k != kind)
     anchor_tolerance = goal_size if config.anchor_tolerance is None else config.anchor_tolerance
-    anchor_env = HeldAction(_acting(_world_env(robot, n_obstacles, others, anchor_tolerance, actor.observation)),
-                            period)
-    expert_world = _world_env(robot, 1, (kind,), float(meta["config"]["goal"]["rho_min"]),  # the true task
+    anchor_env = HeldAction(_acting(_world_env(robot, suite, n_obstacles, others, anchor_tolerance,
+                                               actor.observation)), period)
+    expert_world = _world_env(robot, suite, 1, (kind,), float(meta["config"]["goal"]["rho_min"]),  # the true task
                               actor.observation)
+
+    def in_expert_world(env: Any) -> bool:
+        return suite_kinds(suite, env.scenario)[:1] == [kind] and expert.accepts(env)
+
+    def in_other_world(env: Any) -> bool:
+        return kind not in suite_kinds(suite, env.scenario)
     expert_env = HeldAction(expert_world, period)
     acting_expert_env = HeldAction(_acting(expert_world), period)
     try:
         anchor_obs, _, anchor_before = _play(anchor_env, actor.act, lambda o, e: o, config.anchor_episodes,
-                                             config.seed + 10_000, "anchor", progress)
+                                             config.seed + 10_000, "anchor", progress, in_other_world)
         with torch.no_grad():
             anchor_labels = [actor_mean(np.asarray(anchor_obs)).numpy()] if anchor_obs else []
         expert_before = _play(acting_expert_env, actor.act, None, config.eval_episodes, config.seed + 20_000, "before",
-                              progress, expert.accepts)[2]
+                              progress, in_expert_world)[2]
         expert_obs: list[np.ndarray] = []
         expert_labels: list[np.ndarray] = []
         optimiser = torch.optim.Adam(policy.parameters(), lr=config.learning_rate)
@@ -345,7 +381,7 @@ def clone_into_checkpoint(run: str | Path, kind: str, config: CloneConfig = Clon
         for r in range(config.rounds):
             follow = (lambda o: expert.label(o, expert_world)) if r == 0 else actor.act
             obs, labels, outcome = _play(expert_env, follow, expert.label, config.episodes,
-                                         config.seed + 1_000 * r, f"round {r + 1}", progress, expert.accepts)
+                                         config.seed + 1_000 * r, f"round {r + 1}", progress, in_expert_world)
             expert_obs += obs
             expert_labels += labels
             x = torch.as_tensor(normalize(np.asarray(expert_obs + anchor_obs)))
@@ -354,9 +390,9 @@ def clone_into_checkpoint(run: str | Path, kind: str, config: CloneConfig = Clon
             rounds.append({"round": r + 1, "followed": "expert" if r == 0 else "cloned actor",
                            "success_rate": outcome["success"], "samples": len(y), "loss": loss})
         expert_after = _play(acting_expert_env, actor.act, None, config.eval_episodes, config.seed + 20_000, "after",
-                             progress, expert.accepts)[2]
+                             progress, in_expert_world)[2]
         _, _, anchor_after = _play(anchor_env, actor.act, None, config.anchor_episodes, config.seed + 10_000,
-                                   "anchor after", progress)
+                                   "anchor after", progress, in_other_world)
     finally:
         anchor_env.close()
         expert_env.close()
@@ -369,6 +405,7 @@ def clone_into_checkpoint(run: str | Path, kind: str, config: CloneConfig = Clon
         "wall_time_s": round(elapsed, 1),
         "config": asdict(config),
         "kind": kind,
+        "suite": suite,
         "expert_worlds": {"before": expert_before, "after": expert_after},
         "other_worlds": {"before": anchor_before, "after": anchor_after, "obstacles": n_obstacles,
                          "goal_tolerance": anchor_tolerance},
