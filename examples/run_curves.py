@@ -21,16 +21,15 @@ import matplotlib
 matplotlib.use("Agg")  # headless: the figure only goes to a file
 import matplotlib.pyplot as plt  # noqa: E402
 
+from rayreach.learning.selection import read_validation  # noqa: E402
+
 MODELS = Path(__file__).resolve().parents[1] / "models"
 
 
-def rows(path: Path, until: float) -> list[dict[str, float]]:
-    """The rows of a run's csv file up to ``until`` decisions, as numbers ([] where absent)."""
-    if not path.is_file():
-        return []
-    with path.open() as f:
-        table = [{k: float(v) for k, v in row.items() if v not in ("", None)} for row in csv.DictReader(f)]
-    return [row for row in table if row["timesteps"] <= until]
+def curve_rows(run: Path) -> list[dict[str, float]]:
+    """The rows of a run's curve.csv, as numbers."""
+    with (run / "curve.csv").open(newline="") as handle:
+        return [{k: float(v) for k, v in row.items() if v not in ("", None)} for row in csv.DictReader(handle)]
 
 
 def main() -> None:
@@ -46,8 +45,8 @@ def main() -> None:
 
     fig, (training, validation) = plt.subplots(1, 2, figsize=(11, 4), sharey=True)
     for run in args.runs:
-        curve = rows(run / "curve.csv", args.until)
-        checked = rows(run / "validation.csv", args.until)
+        curve = [r for r in curve_rows(run) if r["timesteps"] <= args.until]
+        checked = [r for r in read_validation(run) if r["timesteps"] <= args.until]
         line, = training.plot([r["timesteps"] / 1e6 for r in curve], [r["true_success_rate"] for r in curve],
                               lw=0.8, label=run.name)
         validation.plot([r["timesteps"] / 1e6 for r in checked], [r["success_rate"] for r in checked], "o-",

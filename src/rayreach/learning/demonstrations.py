@@ -165,7 +165,8 @@ class CoverExpert(SlotExpert):
         return min(super().crossing_height(env), ceiling)
 
     def accepts(self, env: Any) -> bool:
-        return self.crossing_height(env) >= super().crossing_height(env) - self.clearance + self.least_clearance
+        highest = super().crossing_height(env) - self.clearance
+        return self.crossing_height(env) >= highest + self.least_clearance
 
     def covered(self, env: Any) -> bool:
         """Whether an obstacle over the goal (its lowest point above the goal) lies within
@@ -175,13 +176,10 @@ class CoverExpert(SlotExpert):
                    for o in env.scenario.obstacles)
 
     def label(self, obs: np.ndarray, env: Any) -> np.ndarray:
-        height = float(env.ee_pos[2])
-        crossing = self.crossing_height(env)
-        if not self.covered(env):
-            return self.action(obs, env.ee_rot[:, 2], height, crossing, self.reach(env))
-        hover = np.array(obs, dtype=float)  # aims over the goal, at the crossing height
-        hover[8] = crossing - height
-        return self.action(hover, env.ee_rot[:, 2], height, crossing, self.reach(env))
+        if self.covered(env):  # aim over the goal, at the crossing height
+            obs = np.array(obs, dtype=float)
+            obs[8] = self.crossing_height(env) - float(env.ee_pos[2])
+        return super().label(obs, env)
 
 
 def _corners(obstacle: Any) -> np.ndarray:
@@ -191,18 +189,23 @@ def _corners(obstacle: Any) -> np.ndarray:
     return np.asarray(obstacle.position) + offsets @ rpy_to_matrix(obstacle.rpy).T
 
 
-def top_of(obstacle: Any) -> float:
-    """Highest z of a box or sphere at its start position."""
+def _heights(obstacle: Any) -> tuple[float, float]:
+    """Lowest and highest z of a box or sphere (moving ones move horizontally only)."""
     if obstacle.shape == "sphere":
-        return float(obstacle.position[2]) + float(obstacle.radius)
-    return float(_corners(obstacle)[:, 2].max())
+        centre, radius = float(obstacle.position[2]), float(obstacle.radius)
+        return centre - radius, centre + radius
+    z = _corners(obstacle)[:, 2]
+    return float(z.min()), float(z.max())
+
+
+def top_of(obstacle: Any) -> float:
+    """Highest z of a box or sphere."""
+    return _heights(obstacle)[1]
 
 
 def bottom_of(obstacle: Any) -> float:
-    """Lowest z of a box or sphere (moving ones move horizontally only)."""
-    if obstacle.shape == "sphere":
-        return float(obstacle.position[2]) - float(obstacle.radius)
-    return float(_corners(obstacle)[:, 2].min())
+    """Lowest z of a box or sphere."""
+    return _heights(obstacle)[0]
 
 
 def horizontal_gap(obstacle: Any, point: np.ndarray, t: float = 0.0) -> float:
@@ -364,6 +367,7 @@ def clone_into_checkpoint(run: str | Path, kind: str, config: CloneConfig = Clon
 
     def in_other_world(env: Any) -> bool:
         return kind not in suite_kinds(suite, env.scenario)
+
     expert_env = HeldAction(expert_world, period)
     acting_expert_env = HeldAction(_acting(expert_world), period)
     try:
