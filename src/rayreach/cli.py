@@ -177,6 +177,13 @@ def build_parser() -> argparse.ArgumentParser:
     train.add_argument("--suite", choices=WORLD_SUITES, default=None,
                        help="the drawn worlds to train in: random (the training box, default) or broad "
                             "(tables, shelves, boxes, clutter, walls up to the arm's reach)")
+    train.add_argument("--clone-at", type=int, default=None, metavar="N",
+                       help="decisions after which the scripted experts of --clone-kinds are cloned into the actor "
+                            "and PPO goes on from the clone (default: the recipe's, 5,000,000 in broad worlds, else "
+                            "never)")
+    train.add_argument("--clone-kinds", default=None, metavar="KIND[,KIND...]",
+                       help="world kinds whose expert is cloned at --clone-at (default: the recipe's, goal_box,shelf "
+                            "in broad worlds; '' for none)")
     train.add_argument("--collision-weight", type=float, default=None,
                        help="reward of a collision (the paper's -10; also changes a resumed run)")
     train.add_argument("--progress-weight", type=float, default=None,
@@ -623,11 +630,12 @@ def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
     from rayreach.robots import get_robot
     from rayreach.learning.bundles import read_bundle_meta
     from rayreach.learning.selection import BEST
-    from rayreach.learning.starts import train_with_starts
+    from rayreach.learning.clone_stage import train_with_clone
     from rayreach.learning.train import recipe, with_envs
 
     robot = get_robot(args.robot).name
-    config = recipe(args.recipe, robot=robot, seed=args.seed, checkpoint_every=args.checkpoint_every)
+    suite = {} if args.suite is None else {"suite": args.suite}
+    config = recipe(args.recipe, robot=robot, seed=args.seed, checkpoint_every=args.checkpoint_every, **suite)
     if args.timesteps is not None:
         config = replace(config, timesteps=args.timesteps)
     out = args.out or f"runs/{robot}-{args.recipe}"
@@ -639,8 +647,6 @@ def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
         config = replace(config, target_kl=args.target_kl or None)
     if args.separate_features:
         config = replace(config, share_features=False)
-    if args.suite is not None:
-        config = replace(config, suite=args.suite)
     if args.starts is not None:
         config = replace(config, starts=args.starts)
     if args.start_decisions is not None:
@@ -661,6 +667,11 @@ def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
                  "progress_around_obstacles", "validate_every", "validate_worlds"):
         if getattr(args, name) is not None:
             overrides[name] = getattr(args, name)
+    if args.clone_at is not None:
+        overrides["clone_at"] = args.clone_at
+    if args.clone_kinds is not None:
+        overrides["clone_kinds"] = tuple(k.strip() for k in args.clone_kinds.split(",") if k.strip())
+        overrides.setdefault("clone_at", config.clone_at if overrides["clone_kinds"] else 0)
     if args.extra_kinds is not None:
         overrides["extra_kinds"] = tuple(k.strip() for k in args.extra_kinds.split(",") if k.strip())
     if args.cover_speed is not None:
@@ -679,7 +690,7 @@ def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
         overrides["learning_rate"] = args.learning_rate
     config = replace(config, **overrides)
     command = _command_line(argv)
-    path = train_with_starts(config, out, resume=args.resume, command=command, resume_overrides=overrides,
+    path = train_with_clone(config, out, resume=args.resume, command=command, resume_overrides=overrides,
                              critic_warmup=args.critic_warmup, freeze_features=args.freeze_features)
     print(f"model: {path}")
     best = read_bundle_meta(path)[0]["state"].get("best")
