@@ -55,6 +55,7 @@ def test_a_run_clones_each_expert_at_its_decision_and_resumes_after_a_stop_in_th
     assert calls == [("goal_box", 256), ("shelf", 256)]
     assert json.loads((out / "clone-goal_box.json").read_text())["timesteps"] == 256
     assert not (out / "clone-shelf.json").exists()
+    assert (out / "demos-goal_box.npz").exists()  # for an imitation term later
 
     calls.clear()
     monkeypatch.setattr(clone_stage, "clone_into_checkpoint",

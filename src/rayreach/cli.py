@@ -184,6 +184,9 @@ def build_parser() -> argparse.ArgumentParser:
     train.add_argument("--clone-kinds", default=None, metavar="KIND[,KIND...]",
                        help="world kinds whose expert is cloned at --clone-at (default: the recipe's, goal_box,shelf "
                             "in broad worlds; '' for none)")
+    train.add_argument("--imitation-steps", type=int, default=None, metavar="N",
+                       help="behaviour-cloning steps on the run's cloned demonstrations (demos-KIND.npz) before each "
+                            "rollout, kept beside PPO (default: 0, none; also changes a resumed run)")
     train.add_argument("--collision-weight", type=float, default=None,
                        help="reward of a collision (the paper's -10; also changes a resumed run)")
     train.add_argument("--progress-weight", type=float, default=None,
@@ -672,6 +675,8 @@ def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
     if args.clone_kinds is not None:
         overrides["clone_kinds"] = tuple(k.strip() for k in args.clone_kinds.split(",") if k.strip())
         overrides.setdefault("clone_at", config.clone_at if overrides["clone_kinds"] else 0)
+    if args.imitation_steps is not None:
+        overrides["imitation_steps"] = args.imitation_steps
     if args.extra_kinds is not None:
         overrides["extra_kinds"] = tuple(k.strip() for k in args.extra_kinds.split(",") if k.strip())
     if args.cover_speed is not None:

@@ -24,6 +24,7 @@ from tqdm import tqdm
 from rayreach.learning.bundles import CheckpointError, Normalization, read_bundle_meta, save_bundle
 
 
+from rayreach.learning.imitation import save_demos
 from rayreach.learning.policy import Policy
 from rayreach.env.decisions import HeldAction
 from rayreach.env.episode import run_episode
@@ -404,6 +405,7 @@ def clone_into_checkpoint(run: str | Path, kind: str, config: CloneConfig = Clon
     meta["state"]["wall_time"] = float(meta["state"]["wall_time"]) + elapsed
     meta["wall_time_s"] = round(meta["state"]["wall_time"], 1)
     save_bundle(model, checkpoint, meta, norm)
+    save_demos(run, kind, expert_obs, expert_labels)  # for an imitation term beside PPO (``imitation``)
     report = {
         "timesteps": int(meta["timesteps"]),
         "wall_time_s": round(elapsed, 1),

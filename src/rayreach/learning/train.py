@@ -23,6 +23,7 @@ from typing import Any, Sequence
 import gymnasium as gym
 import numpy as np
 
+from rayreach.learning.imitation import DEMOS_GLOB, imitation_callback, load_demos
 from rayreach.learning.curriculum import AugmentedGoalSize, GoalSizeParams, ObstacleCurriculum, ObstacleParams
 from rayreach.learning.bundles import CheckpointError, read_bundle_meta, restore_normalization, save_bundle
 from rayreach.learning import selection
@@ -185,6 +186,10 @@ class TrainConfig:
     clone_kinds: tuple[str, ...] = ()
     """World kinds whose expert is cloned at ``clone_at``, in order
     (``rayreach.learning.demonstrations.clonable_kinds`` of the robot and suite)."""
+    imitation_steps: int = 0
+    """Behaviour-cloning steps (256 samples each) on the run's recorded demonstrations before
+    each rollout, an imitation term beside PPO's loss (``rayreach.learning.imitation``; not in
+    the paper); 0: none. They need a clone first, and start once the actor learns."""
     goal: GoalSizeParams = field(default_factory=GoalSizeParams)
     obstacles: ObstacleParams = field(default_factory=ObstacleParams)
     device: str = "cpu"
@@ -208,6 +213,8 @@ class TrainConfig:
         if self.clone_at < 0 or bool(self.clone_kinds) != (self.clone_at > 0):
             raise ValueError(f"clone_at must be > 0 with clone_kinds and 0 without; got {self.clone_at} with "
                              f"{self.clone_kinds or 'no kinds'}")
+        if self.imitation_steps < 0:
+            raise ValueError(f"imitation_steps must be >= 0 (0: none); got {self.imitation_steps}")
         if self.clone_kinds:
             from rayreach.learning.demonstrations import clonable_kinds
 
@@ -847,6 +854,9 @@ def _train(config: TrainConfig, out: Path, resume: bool, command: str, resume_ov
             model = build_model(config, venv, tensorboard_dir)
         remaining = config.timesteps - model.num_timesteps
         callback = _make_callback(config, state, out, config.timesteps, critic_warmup, freeze_features)
+        if config.imitation_steps and (list(out.glob(DEMOS_GLOB)) or not config.clone_kinds):  # none before a clone
+            callbacks = [imitation_callback(*load_demos(out), steps=config.imitation_steps, seed=config.seed),
+                         *callbacks]
         interrupted = False
         if remaining > 0:
             previous = signal.getsignal(signal.SIGTERM)
