@@ -6,7 +6,7 @@ from dataclasses import replace
 import pytest
 
 from rayreach.learning import clone_stage
-from rayreach.learning.bundles import read_bundle_meta
+from rayreach.learning.bundles import CheckpointError, read_bundle_meta
 from rayreach.learning.demonstrations import CloneConfig, clone_into_checkpoint
 from rayreach.learning.train import CHECKPOINT, TrainConfig, config_from_meta, recipe, with_envs
 
@@ -23,7 +23,8 @@ def tiny_broad(**changes) -> TrainConfig:
 def test_the_default_recipe_clones_the_box_and_shelf_experts_in_broad_worlds_only():
     broad = recipe("default", robot="ur5", suite="broad")
     assert broad.clone_kinds == ("goal_box", "shelf") and 0 < broad.clone_at < broad.timesteps
-    assert recipe("default", robot="kr16", suite="broad").starts == 2  # the robot's defaults stay
+    kr16 = recipe("default", robot="kr16", suite="broad")
+    assert kr16.starts == 1 and not kr16.observation.tip_back  # one start; the robot's other defaults stay
     for config in (recipe("default", robot="ur5"), recipe("paper", robot="ur5", suite="broad")):
         assert config.clone_kinds == () and config.clone_at == 0
 
@@ -35,6 +36,18 @@ def test_clone_settings_are_checked_and_name_what_is_valid():
         TrainConfig(suite="broad", clone_kinds=("shelf",))
     with pytest.raises(ValueError, match="clone_at must be > 0 with clone_kinds and 0 without"):
         TrainConfig(clone_at=10)
+    with pytest.raises(ValueError, match="give start_decisions below clone_at, or one start"):
+        TrainConfig(suite="broad", clone_at=10, clone_kinds=("shelf",), starts=2, start_decisions=10)
+
+
+def test_a_run_stopped_inside_the_critic_warmup_finishes_it_and_a_new_run_refuses_old_clones(tmp_path):
+    warmup = clone_stage.CLONE_CRITIC_WARMUP
+    assert clone_stage.warmup_left(1000, 1000) == warmup
+    assert clone_stage.warmup_left(1000 + warmup // 2, 1000) == warmup - warmup // 2
+    assert clone_stage.warmup_left(1000 + warmup, 1000) == 0
+    (tmp_path / "clone-shelf.json").write_text("{}")
+    with pytest.raises(CheckpointError, match="clone-shelf.json in .* left from an earlier run: pass --resume"):
+        clone_stage.train_with_clone(tiny_broad(), tmp_path)
 
 
 def test_a_run_clones_each_expert_at_its_decision_and_resumes_after_a_stop_in_the_stage(tmp_path, monkeypatch):

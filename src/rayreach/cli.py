@@ -634,14 +634,17 @@ def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
     from rayreach.learning.bundles import read_bundle_meta
     from rayreach.learning.selection import BEST
     from rayreach.learning.clone_stage import train_with_clone
-    from rayreach.learning.train import recipe, with_envs
+    from rayreach.learning.train import CHECKPOINT, recipe, with_envs
 
     robot = get_robot(args.robot).name
-    suite = {} if args.suite is None else {"suite": args.suite}
-    config = recipe(args.recipe, robot=robot, seed=args.seed, checkpoint_every=args.checkpoint_every, **suite)
+    out = args.out or f"runs/{robot}-{args.recipe}"
+    suite = args.suite
+    if suite is None and args.resume and (Path(out) / CHECKPOINT).exists():  # its defaults are the run's suite's
+        suite = read_bundle_meta(Path(out) / CHECKPOINT)[0].get("config", {}).get("suite")
+    config = recipe(args.recipe, robot=robot, seed=args.seed, checkpoint_every=args.checkpoint_every,
+                    **({} if suite is None else {"suite": suite}))
     if args.timesteps is not None:
         config = replace(config, timesteps=args.timesteps)
-    out = args.out or f"runs/{robot}-{args.recipe}"
     if args.envs is not None:
         config = with_envs(config, args.envs)
     if args.workers is not None:
@@ -672,6 +675,8 @@ def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
             overrides[name] = getattr(args, name)
     if args.clone_at is not None:
         overrides["clone_at"] = args.clone_at
+        if args.clone_at == 0:
+            overrides["clone_kinds"] = ()
     if args.clone_kinds is not None:
         overrides["clone_kinds"] = tuple(k.strip() for k in args.clone_kinds.split(",") if k.strip())
         overrides.setdefault("clone_at", config.clone_at if overrides["clone_kinds"] else 0)

@@ -10,7 +10,8 @@ Done by hand that took three commands; here ``rayreach train`` runs them.
 An interrupted run resumes with ``--resume``: before the clone as any run, then each kind
 whose report (``clone-KIND.json``) is not yet in the run directory is cloned, and the rest
 trains. The first ``CLONE_CRITIC_WARMUP`` decisions after the clone fit the critic alone, as
-the measured runs did: its values were learned for the actor before the clone.
+the measured runs did: its values were learned for the actor before the clone. A clone
+stopped after its checkpoint was saved but before its report is made again on resume.
 """
 
 from __future__ import annotations
@@ -20,8 +21,9 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from rayreach.learning.bundles import read_bundle_meta
+from rayreach.learning.bundles import CheckpointError, read_bundle_meta
 from rayreach.learning.demonstrations import CloneConfig, clone_into_checkpoint, report_name
+from rayreach.learning.imitation import demos_name, load_demos
 from rayreach.learning.starts import train_with_starts
 from rayreach.learning.train import CHECKPOINT, TrainConfig, config_from_meta, train
 
@@ -48,6 +50,12 @@ def checkpoint_steps(out: Path) -> int | None:
     return int(read_bundle_meta(path)[0]["timesteps"]) if path.exists() else None
 
 
+def warmup_left(steps: int, cloned_at: int) -> int:
+    """Decisions of the critic's warm-up still to come at ``steps`` (a run stopped inside it
+    finishes it when resumed)."""
+    return max(0, cloned_at + CLONE_CRITIC_WARMUP - steps)
+
+
 def train_with_clone(config: TrainConfig, out: str | Path, resume: bool = False, command: str = "",
                      resume_overrides: dict[str, Any] | None = None, clone: CloneConfig = STAGE_CLONE,
                      progress: bool = True, critic_warmup: int = 0, **train_kwargs: Any) -> Path:
@@ -57,6 +65,13 @@ def train_with_clone(config: TrainConfig, out: str | Path, resume: bool = False,
     out = Path(out)
     overrides = resume_overrides or {}
     config = clone_plan(config, out, resume, overrides)
+    if not resume:
+        left = sorted(p.name for pattern in (report_name("*"), demos_name("*")) for p in out.glob(pattern))
+        if left:
+            raise CheckpointError(f"{', '.join(left)} in {out} are left from an earlier run: pass --resume to "
+                                  "continue it, or choose another --out")
+    if config.imitation_steps and not config.clone_kinds:
+        load_demos(out)  # before any training: an imitation term without a clone needs them now
     if not config.clone_kinds or config.timesteps <= config.clone_at:
         return train_with_starts(config, out, resume=resume, command=command, resume_overrides=resume_overrides,
                                  critic_warmup=critic_warmup, **train_kwargs)
@@ -78,7 +93,6 @@ def train_with_clone(config: TrainConfig, out: str | Path, resume: bool = False,
                   f"{report['expert_worlds']['before']['success']:.0%} before, "
                   f"{report['expert_worlds']['after']['success']:.0%} after", flush=True)
     cloned_at = max(json.loads((out / report_name(k)).read_text())["timesteps"] for k in config.clone_kinds)
-    if checkpoint_steps(out) == cloned_at:  # no PPO since the clone yet
-        critic_warmup = max(critic_warmup, CLONE_CRITIC_WARMUP)
+    critic_warmup = max(critic_warmup, warmup_left(checkpoint_steps(out) or 0, cloned_at))
     return train(config, out, resume=True, command=command, resume_overrides=resume_overrides if resume else None,
                  critic_warmup=critic_warmup, **train_kwargs)

@@ -48,7 +48,8 @@ def imitation_callback(observations: np.ndarray, labels: np.ndarray, steps: int,
                        learning_rate: float = 3e-4, seed: int = 0):
     """An SB3 callback that takes ``steps`` Adam steps of the actor's mean action towards the
     labels (mean squared error, ``batch_size`` samples each) before each rollout. It waits
-    while the actor is held (a critic warm-up), and logs ``train/imitation_loss``."""
+    while the actor is held (a critic warm-up), and logs ``train/imitation_loss``. Where the
+    extractor is shared (the default), the steps move the critic's features too."""
     import torch
     from stable_baselines3.common.callbacks import BaseCallback
 
@@ -59,11 +60,12 @@ def imitation_callback(observations: np.ndarray, labels: np.ndarray, steps: int,
     class ImitationCallback(BaseCallback):
         def __init__(self) -> None:
             super().__init__()
-            self.rng = np.random.default_rng(seed)
+            self.rng: Any = None
             self.optimiser: Any = None
 
         def _on_training_start(self) -> None:
             self.optimiser = torch.optim.Adam(self.model.policy.parameters(), lr=learning_rate)
+            self.rng = np.random.default_rng([seed, self.num_timesteps])  # a resumed part draws anew
 
         def _on_rollout_start(self) -> None:
             policy = self.model.policy
@@ -74,8 +76,9 @@ def imitation_callback(observations: np.ndarray, labels: np.ndarray, steps: int,
             for _ in range(steps):
                 pick = self.rng.integers(0, len(observations), size=min(batch_size, len(observations)))
                 obs = observations[pick] if normalize is None else normalize.normalize_obs(observations[pick])
-                mean = policy.get_distribution(torch.as_tensor(obs, dtype=torch.float32)).distribution.mean
-                loss = torch.nn.functional.mse_loss(mean, torch.as_tensor(labels[pick]))
+                x = torch.as_tensor(obs, dtype=torch.float32, device=policy.device)
+                loss = torch.nn.functional.mse_loss(policy.get_distribution(x).distribution.mean,
+                                                    torch.as_tensor(labels[pick], device=policy.device))
                 self.optimiser.zero_grad()
                 loss.backward()
                 self.optimiser.step()
