@@ -1,6 +1,6 @@
 """Which link of the robot touches the obstacle when a policy alone collides.
 
-Runs a policy alone (deterministic) on random validation worlds of its training distribution
+Runs a policy alone (deterministic) on validation worlds of its training suite (random or broad)
 and, for every episode that ends in a collision, asks PyBullet's contacts which links
 penetrate (``Scene.colliding_links``). Rays along the upper arm and forearm would help only
 if those links are what hits; the bar chart says whether they are.
@@ -34,7 +34,7 @@ def links_hit(model: str, obstacles: int, episodes: int) -> tuple[Counter, int]:
     """Per link name, the collision episodes in which it penetrated an obstacle; and how many
     episodes collided."""
     policy = load_policy(resolve_model(model))
-    env = ReachEnv(robot=policy.robot, scenario="random", goal_tolerance=0.01,
+    env = ReachEnv(robot=policy.robot, scenario=policy.suite, goal_tolerance=0.01,
                    random_world=RandomWorldConfig(), observation=policy.observation)
     env.set_n_obstacles(obstacles)  # as ``rayreach rollout --obstacles`` sets it
     stepper = HeldAction(env, policy.decision_period)  # each action held as in training
@@ -57,7 +57,7 @@ def links_hit(model: str, obstacles: int, episodes: int) -> tuple[Counter, int]:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--model", default="ur5", help="ur5 or kr16 (the shipped policy), or a model .zip")
-    parser.add_argument("--obstacles", type=int, default=2, help="obstacles per world")
+    parser.add_argument("--obstacles", type=int, default=2, help="obstacles per world (elements in broad worlds)")
     parser.add_argument("--episodes", type=int, default=10)
     parser.add_argument("--out", required=True, type=Path)
     args = parser.parse_args()

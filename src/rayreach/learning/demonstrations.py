@@ -345,6 +345,8 @@ def clone_into_checkpoint(run: str | Path, kind: str, config: CloneConfig = Clon
         raise ValueError(f"robot '{robot}' does not train on '{kind}' worlds in the {suite} suite; "
                          f"its kinds with an expert: {kinds}")
     torch.manual_seed(config.seed)
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)  # one observation per forward pass: more threads only spin (``load_policy``)
     model = PPO.load(str(checkpoint), device="cpu")
     policy = model.policy
     actor = Policy(model, normalize, meta, checkpoint)
@@ -401,6 +403,7 @@ def clone_into_checkpoint(run: str | Path, kind: str, config: CloneConfig = Clon
     finally:
         anchor_env.close()
         expert_env.close()
+        torch.set_num_threads(threads)
     elapsed = time.perf_counter() - started
     meta["state"]["wall_time"] = float(meta["state"]["wall_time"]) + elapsed
     meta["wall_time_s"] = round(meta["state"]["wall_time"], 1)
