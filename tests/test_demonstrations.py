@@ -219,12 +219,12 @@ def test_kinds_with_an_expert_follow_the_robot_and_the_suite():
     assert clonable_kinds("ur5", "broad") == clonable_kinds("kr16", "broad") == ("shelf", "goal_box")
 
 
-def _broad_outcomes(expert_for, kind: str, worlds: int) -> list[bool]:
+def _broad_outcomes(expert_for, kind: str, worlds: int, robot: str = "ur5") -> list[bool]:
     """Whether ``expert_for(env)`` reaches the goal without a touch (PyBullet closest points)
-    in each of the first ``worlds`` broad UR5 worlds whose goal scene is ``kind`` and which it
-    accepts, actions held 4 control steps."""
-    spec = get_robot("ur5")
-    base = ReachEnv(robot="ur5", scenario="broad", goal_tolerance=0.01, random_world=RandomWorldConfig(n_obstacles=1))
+    in each of the first ``worlds`` broad worlds of ``robot`` whose goal scene is ``kind`` and
+    which it accepts, actions held 4 control steps."""
+    spec = get_robot(robot)
+    base = ReachEnv(robot=robot, scenario="broad", goal_tolerance=0.01, random_world=RandomWorldConfig(n_obstacles=1))
     env = HeldAction(base, 4)
     outcomes: list[bool] = []
     try:
@@ -261,6 +261,16 @@ def test_slot_expert_descends_into_broad_goal_boxes():
         return SlotExpert(ee_step=spec.ee_step * 4, rot_step=spec.rot_step * 4)
 
     assert sum(_broad_outcomes(slot, "goal_box", 8)) >= 5
+
+
+@pytest.mark.parametrize("kind, expert", [("shelf", ShelfExpert), ("goal_box", SlotExpert)])
+def test_the_broad_experts_serve_the_kr16_too(kind, expert):
+    """The KR16's broad worlds reach 1.71 m and its tool starts 30 degrees below horizontal;
+    the same experts enter its shelves and boxes."""
+    def make(spec, env):
+        return expert(ee_step=spec.ee_step * 4, rot_step=spec.rot_step * 4)
+
+    assert sum(_broad_outcomes(make, kind, 8, robot="kr16")) >= 5
 
 
 def test_clone_into_a_broad_run_plays_the_goal_scene_of_its_kind(tmp_path):
