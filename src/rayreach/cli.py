@@ -537,12 +537,12 @@ def _evaluate(args: argparse.Namespace) -> int:
     from rayreach.evaluate.runner import random_experiment
 
     default_planners = "drl,drl-alone" if args.suite else EVAL_PLANNERS
-    planners = tuple(p.strip() for p in (args.planners or default_planners).split(",") if p.strip())
+    planners = _names(args.planners or default_planners)
     runs = args.runs
     if args.suite:
         obstacles = None if args.obstacles == EvaluationConfig.obstacles else args.obstacles
-        experiments = tuple(random_experiment(r.strip(), obstacles, args.split or "test", args.suite)
-                            for r in args.robot.split(",") if r.strip())
+        experiments = tuple(random_experiment(r, obstacles, args.split or "test", args.suite)
+                            for r in _names(args.robot))
         runs = args.episodes or 500
     else:
         for option, value in (("--obstacles", args.obstacles), ("--split", args.split)):
@@ -600,7 +600,7 @@ def _bench_planners(args: argparse.Namespace) -> int:
     from rayreach.planners.ompl_peer import ompl_available
 
     if args.planners:
-        names = [p.strip() for p in args.planners.split(",") if p.strip()]
+        names = list(_names(args.planners))
     else:
         names = [p for p in SAMPLING_PLANNERS if ompl_available() or not p.startswith("ompl")]
     record = bench_planners(args.scenario, args.runs, names, args.time_limit, progress=not args.json)
@@ -615,6 +615,11 @@ def _bench_planners(args: argparse.Namespace) -> int:
         length = "/" if r["path_length_median_m"] is None else f"{r['path_length_median_m']:.3f}"
         print(f"{name:>16} {r['solved']:>7} {r['success']:>8} {t:>14} {length:>14}")
     return 0
+
+
+def _names(text: str) -> tuple[str, ...]:
+    """A comma-separated option's names, blanks dropped ('' gives none)."""
+    return tuple(name.strip() for name in text.split(",") if name.strip())
 
 
 def _speed_range(text: str) -> tuple[float, float]:
@@ -678,12 +683,12 @@ def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
         if args.clone_at == 0:
             overrides["clone_kinds"] = ()
     if args.clone_kinds is not None:
-        overrides["clone_kinds"] = tuple(k.strip() for k in args.clone_kinds.split(",") if k.strip())
+        overrides["clone_kinds"] = _names(args.clone_kinds)
         overrides.setdefault("clone_at", config.clone_at if overrides["clone_kinds"] else 0)
     if args.imitation_steps is not None:
         overrides["imitation_steps"] = args.imitation_steps
     if args.extra_kinds is not None:
-        overrides["extra_kinds"] = tuple(k.strip() for k in args.extra_kinds.split(",") if k.strip())
+        overrides["extra_kinds"] = _names(args.extra_kinds)
     if args.cover_speed is not None:
         overrides["cover_speed"] = _speed_range(args.cover_speed)
     if args.obstacles is not None:
@@ -761,7 +766,7 @@ def _compare_recipes(args: argparse.Namespace) -> int:
     from rayreach.evaluate.compare_recipes import compare_recipes
     from rayreach.robots import get_robot
 
-    variants = tuple(v.strip() for v in args.variants.split(",") if v.strip())
+    variants = _names(args.variants)
     summary = compare_recipes(get_robot(args.robot).name, args.minutes, args.out, episodes=args.episodes,
                               variants=variants, goal=args.goal, obstacles=args.obstacles, jobs=args.jobs)
     for name, data in summary["recipes"].items():

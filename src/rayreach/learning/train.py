@@ -285,7 +285,8 @@ DEFAULT_BY_SUITE: dict[str, dict[str, Any]] = {
 """Where the default recipe differs by suite. In broad worlds PPO alone learned the tables and
 hardly the open boxes or shelves: 12 of 104 boxes and 9 of 114 shelves alone at 12.8 M
 decisions, against 75 and 54 after their experts were cloned at 6.4 M (docs/training.md,
-"Broad worlds"). 16 M decisions with the clone took the UR5 about two hours on two cores. One
+"Broad worlds"). 16 M decisions with the clone took the UR5 2 h 27 min on two cores, shared
+with other work for part of it (docs/training.md, "Broad worlds"). One
 start: the KR16's second start was measured for its shelf in random worlds, and the clone
 teaches the shelf here."""
 
