@@ -219,6 +219,20 @@ def test_a_policy_with_tip_back_rays_reads_them_after_the_129(tmp_path, sighting
                            "readings must hold the 129 rays, then the 24 tip-back rays", readings, 40)
 
 
+def test_a_policy_with_arm_rays_reads_them_after_the_129(tmp_path):
+    """A policy observing the rays round its upper arm and forearm: fed the 129 and then the 64
+    from the simulation, the controller (whose mounts sit on chain frames 2 and 3, not the
+    flange) builds the observation the env built and commands the same joints."""
+    from rayreach.env.observation import ObservationConfig
+
+    def readings(reach, controller, k):
+        return np.r_[reach._ray_fractions, reach._extra_fractions], "fraction"
+
+    _follow_beside_the_env(tmp_path, ObservationConfig(motion=True, arm_rays=True, sightings=2),
+                           plate_over_the_tip(back=0.05, centre_out=0.1, half=0.07), 193,
+                           "readings must hold the 129 rays, then the 64 arm-rays rays", readings, 20)
+
+
 def test_a_policy_with_goal_rays_reads_them_last_in_fractions_or_metres(tmp_path):
     """A policy observing the rays aimed at the goal: the controller says where to cast them
     (as the env casts them) and, fed their readings after the 129, as fractions of their

@@ -227,6 +227,23 @@ def test_rays_beyond_the_129_step_as_reach_env_does(slanted, sightings, goal_sig
         assert (np.array(seen)[:, :, -3:] < 1).any()
 
 
+@pytest.mark.parametrize("robot", ["ur5", "kr16"])
+def test_rays_along_the_arm_step_as_reach_env_does(robot):
+    """Broad worlds, whose tables and shelves lie beside the upper arm and the forearm: the
+    batched env casts the 64 rays round them as ``ReachEnv`` does, and they see something."""
+    from dataclasses import replace
+
+    from rayreach.env.observation import OBS_SIZE, ObservationConfig
+    from rayreach.sim.sensors import N_ARM, N_RAYS
+
+    observation = replace(ObservationConfig.planner(), arm_rays=True, sightings=2)
+    seen: list[np.ndarray] = []
+    outcomes = _compare(robot, "broad", 4, 6, max_steps=60, goal_tolerance=0.1, observation=observation, seen=seen)
+    assert sum(outcomes.values()) >= 6
+    start = OBS_SIZE + replace(observation, arm_rays=False, sightings=0).extra_size(N_RAYS)
+    assert (np.array(seen)[:, :, start:start + N_ARM] < 1).any()
+
+
 def test_sightings_of_a_plate_many_rays_meet_at_one_distance_step_as_reach_env_does():
     """A plate square to the tool over its tip: a whole ring of tip-back rays meets it at
     one distance, and both envs must choose the same of them as the nearest sighting."""

@@ -221,7 +221,7 @@ def test_the_latest_sighting_is_the_nearest_hit_pybullet_finds_on_every_ray_the_
         assert obs.shape == env.observation_space.shape
         assert config.extra_size(N_RAYS) == ObservationConfig.planner().extra_size(N_RAYS) + 8
         origins, directions = env.rays.world_rays(env.frames)
-        extra = RayModel.extra(env.spec_robot, RAY_RANGE, tip_back=True).world_rays(env.frames)
+        extra = RayModel.extra(env.spec_robot, RAY_RANGE, ["tip_back"]).world_rays(env.frames)
         origins, directions = np.concatenate((origins, extra[0])), np.concatenate((directions, extra[1]))
         hits = p.rayTestBatch(origins.tolist(), (origins + RAY_RANGE * directions).tolist(),
                               collisionFilterMask=OBSTACLE_GROUP, physicsClientId=env.scene.client)

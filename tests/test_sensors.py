@@ -32,7 +32,7 @@ from rayreach.sim.sensors import (
     RayModel,
     ray_layout,
 )
-from rayreach.sim.transforms import quaternion_to_matrix, rpy_to_matrix
+from rayreach.sim.transforms import matrix_to_rpy, quaternion_to_matrix, rpy_to_matrix
 
 BULLET_SURFACE_TOL = 1.05e-3
 """Bullet's ray hit points lie within this distance (m) of the analytic surface."""
@@ -457,7 +457,7 @@ def test_layout_rows_with_tip_back_list_its_rays_after_the_129():
     from rayreach.sim.sensors import N_TIP_BACK, layout_rows
 
     spec = get_robot("ur5")
-    rows = layout_rows(spec, tip_back=True)
+    rows = layout_rows(spec, ["tip_back"])
     assert [r["index"] for r in rows] == list(range(N_RAYS + N_TIP_BACK))
     assert layout_rows(spec) == rows[:N_RAYS]
     back = rows[N_RAYS:]
@@ -476,10 +476,10 @@ def test_layout_rows_list_the_slanted_rays_after_the_tip_back_ones():
     from rayreach.sim.sensors import N_SLANTED, N_TIP_BACK, layout_rows
 
     spec = get_robot("kr16")
-    rows = layout_rows(spec, tip_back=True, slanted=True)
+    rows = layout_rows(spec, ["tip_back", "slanted"])
     assert [r["index"] for r in rows] == list(range(N_RAYS + N_TIP_BACK + N_SLANTED))
-    assert rows[:N_RAYS + N_TIP_BACK] == layout_rows(spec, tip_back=True)
-    alone = layout_rows(spec, slanted=True)[N_RAYS:]
+    assert rows[:N_RAYS + N_TIP_BACK] == layout_rows(spec, ["tip_back"])
+    alone = layout_rows(spec, ["slanted"])[N_RAYS:]
     assert [r["index"] for r in alone] == list(range(N_RAYS, N_RAYS + N_SLANTED))
     slanted = rows[N_RAYS + N_TIP_BACK:]
     assert {r["sensor"] for r in slanted} == {"slanted"}
@@ -492,3 +492,105 @@ def test_layout_rows_list_the_slanted_rays_after_the_tip_back_ones():
     # each leaves the surface outwards, along its origin's radial direction
     outward = origins[:, :2] / spec.tool.radius
     np.testing.assert_allclose(np.sum(outward * directions[:, :2], axis=1), np.sqrt(0.5), atol=1e-4)  # rounded rows
+
+
+# ---------------------------------------------------------------------- rays along the arm
+def _arm_rays(rig) -> RayModel:
+    return RayModel.extra(rig.spec, RAY_RANGE, ["arm_rays"])
+
+
+def test_arm_rays_ring_the_upper_arm_and_the_forearm_from_inside(rig):
+    """Each ring's centre lies inside the arm as PyBullet holds it, and each mount moves with
+    its URDF link: its pose in PyBullet's link frame is the same in every configuration."""
+    from rayreach.sim.sensors import ARM_AZIMUTHS, ARM_MOUNTS, ARM_STATIONS, N_ARM, mount_offset
+
+    rng = np.random.default_rng(5)
+    rays = _arm_rays(rig)
+    assert rays.n_rays == N_ARM == len(ARM_MOUNTS) * ARM_STATIONS * ARM_AZIMUTHS
+    probe = p.createCollisionShape(p.GEOM_SPHERE, radius=1e-4, physicsClientId=rig.scene.client)
+    in_link = {name: [] for name in ARM_MOUNTS}
+    for _ in range(5):
+        q = rig.random_q(rng)
+        rig.scene.set_joints(q)
+        frames = rig.kin.frames(q)
+        origins, directions = rays.world_rays(frames)
+        centres = origins[::ARM_AZIMUTHS]
+        for centre in centres:
+            close = p.getClosestPoints(rig.scene.robot, -1, 0.05, collisionShapeB=probe,
+                                       collisionShapePositionB=centre.tolist(), physicsClientId=rig.scene.client)
+            assert min(c[8] for c in close) < -0.01  # over a centimetre inside some link
+        for name in ARM_MOUNTS:
+            mount = rig.spec.mounts[name]
+            pose = frames[mount.frame] @ mount_offset(mount)
+            pos, quat = rig.scene.link_pose(mount.link)
+            rot = quaternion_to_matrix(quat / np.linalg.norm(quat))
+            in_link[name].append(np.concatenate((rot.T @ (pose[:3, 3] - pos), (rot.T @ pose[:3, :3]).ravel())))
+        # radial: each ray square to its ring's axis, the rings spaced along it
+        axis = (centres[1] - centres[0]) / np.linalg.norm(centres[1] - centres[0])
+        np.testing.assert_allclose(directions[:ARM_STATIONS * ARM_AZIMUTHS] @ axis, 0.0, atol=1e-9)
+    for name, poses in in_link.items():
+        np.testing.assert_allclose(poses, np.repeat(poses[:1], len(poses), axis=0), atol=1e-6, err_msg=name)
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_arm_rays_see_a_box_beside_the_upper_arm_that_no_paper_ray_sees(rigs, backend):
+    """A box 0.15 m from the upper arm's axis, square to one of its rays: that ray reads its
+    distance, and none of the paper's 129 sees it."""
+    from rayreach.sim.sensors import ARM_AZIMUTHS, ARM_STATIONS
+
+    rig = rigs["ur5"]
+    q = np.asarray(rig.spec.home)
+    rig.scene.set_joints(q)
+    frames = rig.kin.frames(q)
+    origins, directions = _arm_rays(rig).world_rays(frames)
+    ray = ARM_AZIMUTHS + 2  # the upper arm's second ring
+    face = origins[ray] + 0.15 * directions[ray]
+    centre = face + 0.05 * directions[ray]
+    # a 0.1 m cube with one face through ``face``, square to the ray
+    x = directions[ray]
+    y = np.cross(x, [0.0, 0.0, 1.0]) if abs(x[2]) < 0.9 else np.cross(x, [1.0, 0.0, 0.0])
+    y /= np.linalg.norm(y)
+    rot = np.stack((x, y, np.cross(x, y)), axis=1)
+    rpy = tuple(float(v) for v in matrix_to_rpy(rot))
+    rig.scene.set_obstacles([ObstacleSpec("box", tuple(centre), rpy, half_extents=(0.05, 0.05, 0.05))])
+    try:
+        caster = rig.scene.caster(backend)
+        seen = caster.cast(origins, directions, RAY_RANGE)
+        assert seen[ray] == pytest.approx(0.15 / RAY_RANGE, abs=1e-3)
+        assert seen[:ARM_STATIONS * ARM_AZIMUTHS].min() == seen[ray]
+        paper = caster.cast(*rig.rays.world_rays(frames), RAY_RANGE)
+        np.testing.assert_array_equal(paper, np.ones(N_RAYS))
+    finally:
+        rig.scene.set_obstacles([])
+
+
+def test_layout_rows_list_the_arm_rays_in_their_mount_frames(capsys):
+    """``rayreach rays --arm-rays``: the 64 rays follow the 129, each with its mount's link and
+    chain frame and no place in the flange frame, which moves against them."""
+    from rayreach.cli import main
+    from rayreach.robots import get_robot
+    from rayreach.sim.sensors import N_ARM, layout_rows
+
+    spec = get_robot("kr16")
+    rows = layout_rows(spec, ["arm_rays"])
+    arm = rows[N_RAYS:]
+    assert len(arm) == N_ARM and {r["sensor"] for r in arm} == {"arm-rays"}
+    assert [r["frame"] for r in arm] == [2] * 32 + [3] * 32
+    assert all(r["origin_flange"] is None and r["direction_flange"] is None for r in arm)
+    assert main(["rays", "--robot", "kr16", "--arm-rays"]) == 0
+    printed = capsys.readouterr().out.splitlines()
+    assert printed[-1].split()[:4] == [str(N_RAYS + N_ARM - 1), "arm-rays", "link_3", "3"]
+
+
+def test_arm_rays_need_mounts_along_the_links():
+    from dataclasses import replace
+
+    from rayreach.robots import get_robot
+    from rayreach.sim.sensors import arm_layout
+
+    spec = get_robot("ur5")
+    bare = replace(spec, mounts={k: v for k, v in spec.mounts.items() if k != "forearm"})
+    with pytest.raises(ValueError, match=r"no mounts \['forearm'\].*upper_arm"):
+        arm_layout(bare)
+    with pytest.raises(ValueError, match="valid: tip_back, slanted, arm_rays"):
+        RayModel.extra(spec, RAY_RANGE, ["elbow"])

@@ -214,6 +214,9 @@ def build_parser() -> argparse.ArgumentParser:
     train.add_argument("--slanted", action=argparse.BooleanOptionalAction, default=None,
                        help="read the 32 slanted rays along the tool (default: off; a resumed run keeps its own "
                             "observation)")
+    train.add_argument("--arm-rays", action=argparse.BooleanOptionalAction, default=None,
+                       help="read the 64 rays round the upper arm and the forearm (default: off; a resumed run "
+                            "keeps its own observation)")
     train.add_argument("--goal-sight", action=argparse.BooleanOptionalAction, default=None,
                        help="read the 3 rays from the tool aimed at the goal (default: off; a resumed run keeps its "
                             "own observation)")
@@ -369,6 +372,8 @@ def build_parser() -> argparse.ArgumentParser:
                       help="also the 24 tip-back rays (129-152) that a policy of the default recipe reads")
     rays.add_argument("--slanted", action="store_true",
                       help="also the 32 slanted rays, after the tip-back ones where those are listed")
+    rays.add_argument("--arm-rays", action="store_true",
+                      help="also the 64 rays round the upper arm and the forearm, after the slanted ones")
 
     demo = sub.add_parser("demo", help="a scripted episode on exp1, drawn to a PNG")
     demo.add_argument("--scenario", default="exp1")
@@ -900,10 +905,10 @@ def _robots(args: argparse.Namespace) -> int:
 
 def _rays(args: argparse.Namespace) -> int:
     from rayreach.robots import get_robot
-    from rayreach.sim.sensors import RAY_RANGE, layout_rows
+    from rayreach.sim.sensors import EXTRA_RAYS, RAY_RANGE, layout_rows
 
     spec = get_robot(args.robot)
-    rows = layout_rows(spec, tip_back=args.tip_back, slanted=args.slanted)
+    rows = layout_rows(spec, [name for name in EXTRA_RAYS if getattr(args, name)])
     if args.plot is not None:
         from rayreach.evaluate.ray_layout import ray_layout_figure
 
@@ -912,12 +917,15 @@ def _rays(args: argparse.Namespace) -> int:
         print(json.dumps(rows))
         return 0
     print(f"{spec.name}: {len(rows)} rays, range {RAY_RANGE} m; origin and direction in the flange frame "
-          f"({spec.flange_link}, chain frame {spec.n_joints}, z along the tool)")
-    print(f"{'ray':>3}  {'sensor':<10} {'mount link':<14} {'origin (m)':<26} direction")
+          f"({spec.flange_link}, chain frame {spec.n_joints}, z along the tool), or in the mount frame of a "
+          "mount elsewhere (frame = its chain frame; --json gives the mount's offset)")
+    print(f"{'ray':>3}  {'sensor':<10} {'mount link':<14} {'frame':>5}  {'origin (m)':<26} direction")
     for r in rows:
-        origin = " ".join(f"{v:+.3f}" for v in r["origin_flange"])
-        direction = " ".join(f"{v:+.3f}" for v in r["direction_flange"])
-        print(f"{r['index']:>3}  {r['sensor']:<10} {r['link']:<14} {origin:<26} {direction}")
+        flange = r["origin_flange"] is not None
+        origin = " ".join(f"{v:+.3f}" for v in (r["origin_flange"] if flange else r["origin"]))
+        direction = " ".join(f"{v:+.3f}" for v in (r["direction_flange"] if flange else r["direction"]))
+        frame = "flange" if flange else f"{r['frame']}"
+        print(f"{r['index']:>3}  {r['sensor']:<10} {r['link']:<14} {frame:>6} {origin:<26} {direction}")
     return 0
 
 

@@ -110,7 +110,7 @@ class ArmController:
         self.kin = Kinematics(self.spec, base_position, base_rpy)
         self.rays = RayModel(self.spec, ray_range)
         observation = self.policy.observation
-        self.extra_rays = RayModel.extra(self.spec, ray_range, observation.tip_back, observation.slanted)
+        self.extra_rays = RayModel.extra(self.spec, ray_range, observation.ray_sets)
         self.ray_range, self.goal_tolerance, self.ik = float(ray_range), float(goal_tolerance), ik
         self.acting = acting
         if capsules is None and acting.safety.arm_clearance > 0:
@@ -122,8 +122,9 @@ class ArmController:
         self.n_goal_rays = N_GOAL_RAYS * observation.goal_sight
         self.n_readings = N_RAYS + observation.extra_rays + self.n_goal_rays
         """Ray readings a step takes: the paper's 129, then the rays the policy observes beyond
-        them, the 24 tip-back and the 32 slanted (``rayreach rays --tip-back --slanted``), then
-        the 3 aimed at the goal (``goal_rays``); the acting layers read the 129."""
+        them, the 24 tip-back, the 32 slanted and the 64 along the arm (``rayreach rays --tip-back
+        --slanted --arm-rays``), then the 3 aimed at the goal (``goal_rays``); the acting layers read
+        the 129."""
         self.step_scale = np.array([self.spec.ee_step] * 3 + [self.spec.rot_step] * 3)
         self.seed = seed
         self._goal: np.ndarray | None = None
@@ -172,7 +173,7 @@ class ArmController:
 
     def step(self, q: np.ndarray, readings: np.ndarray, unit: str = "fraction") -> ControlStep:
         """The next joint target from the measured joints ``q`` (rad) and the ``n_readings``
-        ray ``readings``: the 129, then the tip-back and the slanted ones where the policy has them,
+        ray ``readings``: the 129, then the tip-back, slanted and arm ones where the policy has them,
         then the goal rays cast from ``goal_rays(q)`` where it has those (``unit``: ``fraction``
         of the range, or of the goal rays' length, 1 for nothing seen; or ``m``, where anything at
         or beyond that reads as nothing seen)."""
@@ -252,7 +253,7 @@ class ArmController:
         if r.shape != (self.n_readings,):
             observation = self.policy.observation
             what = f"{N_RAYS} rays" + "".join(f", then the {n} {name} rays"
-                                              for name, n, _ in extra_sets(observation.tip_back, observation.slanted))
+                                              for name, n, _ in extra_sets(observation.ray_sets))
             what += f", then the {N_GOAL_RAYS} goal rays" if self.n_goal_rays else ""
             raise ValueError(f"readings must hold the {what} in the layout's order (docs/rays.md, rayreach rays), "
                              f"got {np.asarray(readings).shape}")

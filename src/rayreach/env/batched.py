@@ -97,7 +97,7 @@ class BatchedReachEnv(VecEnv):
         base_rpy = fixed.base_rpy if fixed else None
         self.kin = Kinematics(spec, base_pos, base_rpy)
         self.layout = RayArrays.of(RayModel(spec, cfg.ray_range))
-        extra = RayModel.extra(spec, cfg.ray_range, cfg.observation.tip_back, cfg.observation.slanted)
+        extra = RayModel.extra(spec, cfg.ray_range, cfg.observation.ray_sets)
         self.extra_layout = RayArrays.of(extra) if extra is not None else None
         self.collision = CollisionWorlds(spec, n_worlds, base_pos, base_rpy)
         self.spheres = self.collision.spheres

@@ -27,6 +27,8 @@ tip_back             24      fractions of the rays from the tool tip that look b
                              the arm (``rayreach.sim.sensors.tip_back_layout``), now
 slanted              32      fractions of the rays slanted along the tool
                              (``rayreach.sim.sensors.slanted_layout``), now
+arm_rays             64      fractions of the rays round the upper arm and the forearm
+                             (``rayreach.sim.sensors.arm_layout``), now
 sightings x 4        each    the nearest point any ray saw in a window of
                              ``sighting_window`` steps (k = 0: the window under way):
                              where it was seen minus where the end effector is now, over
@@ -49,7 +51,7 @@ import gymnasium as gym
 import numpy as np
 
 from rayreach.sim.goal_rays import N_GOAL_RAYS
-from rayreach.sim.sensors import N_RAYS, RAY_RANGE, extra_sets
+from rayreach.sim.sensors import EXTRA_RAYS, N_RAYS, RAY_RANGE, extra_sets
 from rayreach.sim.transforms import matrix_to_rpy
 
 N_ROBOT_OBS = 13
@@ -101,6 +103,10 @@ class ObservationConfig:
     slanted: bool = False
     """Rays beside the paper's 129, slanted along the tool, that meet a thin plate lying across
     it (docs/training.md, "Rays slanted along the tool"); read after the tip-back rays."""
+    arm_rays: bool = False
+    """Rays beside the paper's 129 in rings round the upper arm and the forearm, which in broad
+    worlds hit much of what the tool does not (docs/training.md, "What the arm hits"); read
+    after the slanted rays."""
     sightings: int = 0
     """Windows of remembered sightings (0: none): the nearest point the rays saw in each, where
     it was seen. A 4 mm plate met edge-on is seen by 1 to 3 rays for a few steps and then by
@@ -152,7 +158,12 @@ class ObservationConfig:
     @property
     def extra_rays(self) -> int:
         """Rays read beyond the paper's 129 (``rayreach.sim.sensors.extra_layout``)."""
-        return sum(n for _, n, _ in extra_sets(self.tip_back, self.slanted))
+        return sum(n for _, n, _ in extra_sets(self.ray_sets))
+
+    @property
+    def ray_sets(self) -> tuple[str, ...]:
+        """The ``rayreach.sim.sensors.EXTRA_RAYS`` sets read beyond the paper's 129, by field name."""
+        return tuple(name for name in EXTRA_RAYS if getattr(self, name))
 
 
 class Observer:
@@ -262,7 +273,7 @@ class Observer:
         if c.extra_rays:
             if extra is None:
                 raise ValueError(f"this observation holds {c.extra_rays} rays beyond the 129 (ObservationConfig."
-                                 "tip_back, slanted); pass their fractions")
+                                 "tip_back, slanted, arm_rays); pass their fractions")
             out[which, k: k + c.extra_rays] = extra
             k += c.extra_rays
         if c.sightings:

@@ -240,7 +240,7 @@ class ReachEnv(gym.Env):
         self.config = make_config(self.config, {"observation": observation})
         self.observer = Observer(observation, 1, N_RAYS, OBS_SIZE, self.spec_robot.ee_step)
         self.observation_space = self.observer.space(self._paper_space)
-        self._extra = RayModel.extra(self.spec_robot, self.config.ray_range, observation.tip_back, observation.slanted)
+        self._extra = RayModel.extra(self.spec_robot, self.config.ray_range, observation.ray_sets)
         self._ready = False
 
     def set_n_obstacles(self, n: int) -> None:

@@ -43,6 +43,12 @@ KR16 = RobotSpec(
     mounts={
         "wrist": SensorMount(link="link_6", frame=6, xyz=(0.0, 0.0, -0.16)),
         "tool": SensorMount(link="rayreach_tool", frame=6),
+        # the upper arm runs along -x of DH frame 2 from the elbow, its tube 0.15 m beside the
+        # joint axes (the mesh's, measured); the forearm along the a4 axis from the elbow to the
+        # wrist, through link_3 and then link_4, which turns about that axis
+        "upper_arm": SensorMount(link="link_2", frame=2, xyz=(0.0, 0.0, -0.15), rpy=(0.0, -math.pi / 2, 0.0),
+                                 length=0.68),
+        "forearm": SensorMount(link="link_3", frame=3, length=0.67),
     },
     workspace_low=(-0.8, -0.4, 0.4),
     workspace_high=(0.8, 0.8, 1.8),

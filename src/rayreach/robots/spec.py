@@ -45,6 +45,9 @@ class SensorMount:
     frame: int
     xyz: tuple[float, float, float] = (0.0, 0.0, 0.0)
     rpy: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    length: float | None = None
+    """For a mount of rings along an arm link (``rayreach.sim.sensors.arm_layout``): how far the
+    link runs along the mount's z axis, m; None for a mount of one sensor."""
 
 
 @dataclass(frozen=True)

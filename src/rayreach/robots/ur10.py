@@ -26,6 +26,9 @@ UR10 = RobotSpec(
     mounts={
         "wrist": SensorMount(link="wrist_3_link", frame=6, xyz=(0.0, 0.0, -0.1)),
         "tool": SensorMount(link="rayreach_tool", frame=6),
+        # the URDF's link frames: z runs from the joint up each tube to the next joint
+        "upper_arm": SensorMount(link="upper_arm_link", frame=2, length=0.612),
+        "forearm": SensorMount(link="forearm_link", frame=3, length=0.5723),
     },
     workspace_low=(-0.5, 0.4, 0.2),
     workspace_high=(0.5, 0.9, 0.6),

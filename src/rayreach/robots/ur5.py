@@ -53,6 +53,12 @@ UR5 = RobotSpec(
     mounts={
         "wrist": SensorMount(link="wrist_3_link", frame=6, xyz=(0.0, 0.0, -0.09)),
         "tool": SensorMount(link="rayreach_tool", frame=6),
+        # along the DH x axes of the upper arm and the forearm, at the URDF's lateral offsets
+        # of their tubes (shoulder 0.13585, elbow -0.1197), from the distal joint back
+        "upper_arm": SensorMount(link="upper_arm_link", frame=2, xyz=(0.0, 0.0, 0.13585), rpy=(0.0, math.pi / 2, 0.0),
+                                 length=0.425),
+        "forearm": SensorMount(link="forearm_link", frame=3, xyz=(0.0, 0.0, 0.01615), rpy=(0.0, math.pi / 2, 0.0),
+                               length=0.39225),
     },
     workspace_low=(-0.4, 0.3, 0.2),
     workspace_high=(0.4, 0.7, 0.5),

@@ -17,6 +17,10 @@ from  count   sensor       layout (in the mount frame, z = the tool's pointing a
                            angles 20 and 40 deg, origin at the tool tip
 ====  ======  ===========  ===========================================================
 
+Beyond the 129, ``EXTRA_RAYS`` lists the sets an observation may read after them: rays from
+the tip back towards the arm, rays slanted along the tool, and rings round the upper arm and
+the forearm.
+
 Each ray reports its hit fraction in [0, 1] over ``RAY_RANGE`` (1 = nothing within range).
 The robot (arm and tool) is invisible to the rays.
 
@@ -29,7 +33,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Callable, Protocol
+from typing import Callable, Iterable, Protocol
 
 import numpy as np
 
@@ -49,6 +53,12 @@ tip, deg."""
 SLANTED_HEIGHTS = (0.25, 0.75)
 """Where along the tool the slanted rays start, as shares of its length from the flange."""
 N_SLANTED = 8 * len(SLANTED_HEIGHTS) * 2
+ARM_MOUNTS = ("upper_arm", "forearm")
+"""The links ``arm_layout`` rings with rays, by their ``RobotSpec.mounts`` name."""
+ARM_STATIONS = 4
+"""Rings of rays along each of ``ARM_MOUNTS``, at the middles of equal parts of its length."""
+ARM_AZIMUTHS = 8
+N_ARM = len(ARM_MOUNTS) * ARM_STATIONS * ARM_AZIMUTHS
 
 
 @dataclass(frozen=True)
@@ -117,49 +127,72 @@ def slanted_layout(spec: RobotSpec) -> list[RayGroup]:
     return [RayGroup("tool", np.array(origins), np.array(directions))]
 
 
-EXTRA_RAYS = {"tip_back": ("tip-back", N_TIP_BACK, tip_back_layout), "slanted": ("slanted", N_SLANTED, slanted_layout)}
+def arm_layout(spec: RobotSpec) -> list[RayGroup]:
+    """Rays beside the paper's 129, an option of the observation (``ObservationConfig.arm_rays``):
+    rings round the upper arm and the forearm, which no paper ray watches and which hit most
+    of what the tool does not in broad worlds (docs/training.md, "What the arm hits"). Each
+    of ``ARM_MOUNTS`` is a mount whose z axis runs along its link for ``SensorMount.length``;
+    ``ARM_STATIONS`` rings of ``ARM_AZIMUTHS`` radial rays, 45 deg apart, start on that axis,
+    inside the link, so a ray's reading is the clearance from the link's axis. Order: mount,
+    then station from the mount's origin, then azimuth."""
+    missing = [name for name in ARM_MOUNTS if spec.mounts.get(name) is None or not spec.mounts[name].length]
+    if missing:
+        raise ValueError(f"robot '{spec.name}' has no mounts {missing} with a length along their link; rays along "
+                         f"the arm need RobotSpec.mounts {list(ARM_MOUNTS)} (see robots/ur5.py)")
+    az = np.radians(np.arange(ARM_AZIMUTHS) * 360.0 / ARM_AZIMUTHS)
+    radial = np.stack((np.cos(az), np.sin(az), np.zeros(ARM_AZIMUTHS)), axis=1)
+    groups = []
+    for name in ARM_MOUNTS:
+        heights = (np.arange(ARM_STATIONS) + 0.5) * spec.mounts[name].length / ARM_STATIONS
+        origins = np.zeros((ARM_STATIONS * ARM_AZIMUTHS, 3))
+        origins[:, 2] = np.repeat(heights, ARM_AZIMUTHS)
+        groups.append(RayGroup(name, origins, np.tile(radial, (ARM_STATIONS, 1))))
+    return groups
+
+
+EXTRA_RAYS = {"tip_back": ("tip-back", N_TIP_BACK, tip_back_layout), "slanted": ("slanted", N_SLANTED, slanted_layout),
+              "arm_rays": ("arm-rays", N_ARM, arm_layout)}
 """The ray sets an observation may read after the paper's 129, in that order, by their
 ``ObservationConfig`` field: name, count, layout."""
 
 
-def extra_sets(tip_back: bool, slanted: bool) -> list[tuple[str, int, Callable[[RobotSpec], list[RayGroup]]]]:
-    """The ``EXTRA_RAYS`` entries an observation with these fields reads, in observation order."""
-    wanted = {"tip_back": tip_back, "slanted": slanted}
-    return [entry for field, entry in EXTRA_RAYS.items() if wanted[field]]
+def extra_sets(fields: Iterable[str]) -> list[tuple[str, int, Callable[[RobotSpec], list[RayGroup]]]]:
+    """The ``EXTRA_RAYS`` entries of these fields (``ObservationConfig.ray_sets``), in observation order."""
+    fields = set(fields)
+    unknown = fields - set(EXTRA_RAYS)
+    if unknown:
+        raise ValueError(f"unknown ray sets {sorted(unknown)}; valid: {', '.join(EXTRA_RAYS)}")
+    return [entry for field, entry in EXTRA_RAYS.items() if field in fields]
 
 
-def extra_layout(spec: RobotSpec, tip_back: bool, slanted: bool) -> list[RayGroup]:
-    """The rays an observation reads after the paper's 129: the tip-back rays, then the slanted."""
-    return [group for _, _, layout in extra_sets(tip_back, slanted) for group in layout(spec)]
+def extra_layout(spec: RobotSpec, fields: Iterable[str]) -> list[RayGroup]:
+    """The rays an observation reads after the paper's 129, set by set in ``EXTRA_RAYS`` order."""
+    return [group for _, _, layout in extra_sets(fields) for group in layout(spec)]
 
 
 def mount_offset(mount: SensorMount) -> np.ndarray:
     return pose_matrix(mount.xyz, rpy_to_matrix(mount.rpy))
 
 
-def layout_rows(spec: RobotSpec, tip_back: bool = False, slanted: bool = False) -> list[dict]:
+def layout_rows(spec: RobotSpec, extra: Iterable[str] = ()) -> list[dict]:
     """Every ray in observation order, as a user mounts or emulates it: its sensor, the mount's
-    link and chain frame, its origin and unit direction in the mount frame and in the flange
-    frame (chain frame n, the tool's axis along +z). ``tip_back``, ``slanted``: then those rays
-    (indices from 129, the tip-back first), which a policy observing them reads too."""
+    link and chain frame, its origin and unit direction in the mount frame and, for a mount on
+    the flange, in the flange frame (chain frame n, the tool's axis along +z; None elsewhere).
+    ``extra``: then the rays of those ``EXTRA_RAYS`` sets (indices from 129, in that table's
+    order), which a policy observing them reads too."""
+    groups = [(group, sensor) for group, sensor in zip(ray_layout(spec), SENSOR_SLICES)]
+    groups += [(group, name) for name, _, layout in extra_sets(extra) for group in layout(spec)]
     rows = []
-    groups = list(zip(ray_layout(spec), SENSOR_SLICES.items()))
-    start = N_RAYS
-    for name, n, layout in extra_sets(tip_back, slanted):
-        groups.append((layout(spec)[0], (name, slice(start, start + n))))
-        start += n
-    for group, (sensor, block) in groups:
+    for group, sensor in groups:
         mount = spec.mounts[group.mount]
-        if mount.frame != spec.n_joints:
-            raise ValueError(f"mount '{group.mount}' of {spec.name} sits on chain frame {mount.frame}, not on the "
-                             f"flange (frame {spec.n_joints}): its rays have no fixed place in the flange frame")
-        offset = mount_offset(mount)
-        for k, (origin, direction) in enumerate(zip(group.origins, group.directions)):
-            rows.append({"index": block.start + k, "sensor": sensor, "mount": group.mount, "link": mount.link,
+        offset = mount_offset(mount) if mount.frame == spec.n_joints else None
+        for origin, direction in zip(group.origins, group.directions):
+            rows.append({"index": len(rows), "sensor": sensor, "mount": group.mount, "link": mount.link,
                          "frame": mount.frame, "origin": origin.round(6).tolist(),
                          "direction": direction.round(6).tolist(),
-                         "origin_flange": (offset[:3, :3] @ origin + offset[:3, 3]).round(6).tolist(),
-                         "direction_flange": (offset[:3, :3] @ direction).round(6).tolist()})
+                         "origin_flange": None if offset is None
+                         else (offset[:3, :3] @ origin + offset[:3, 3]).round(6).tolist(),
+                         "direction_flange": None if offset is None else (offset[:3, :3] @ direction).round(6).tolist()})
     return rows
 
 
@@ -189,10 +222,10 @@ class RayModel:
             self._blocks.append((m.frame, mount_offset(m), block, all_o[block], all_d[block].T.copy()))
 
     @classmethod
-    def extra(cls, spec: RobotSpec, ray_range: float = RAY_RANGE, tip_back: bool = False,
-              slanted: bool = False) -> "RayModel | None":
-        """The rays read after the paper's (``extra_layout``) in place of them; None where there are none."""
-        groups = extra_layout(spec, tip_back, slanted)
+    def extra(cls, spec: RobotSpec, ray_range: float = RAY_RANGE, fields: Iterable[str] = ()) -> "RayModel | None":
+        """The rays of the ``EXTRA_RAYS`` sets ``fields`` (``extra_layout``) in place of the
+        paper's; None where there are none."""
+        groups = extra_layout(spec, fields)
         return cls(spec, ray_range, groups) if groups else None
 
     def world_rays(self, frames: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
