@@ -21,7 +21,7 @@ from rayreach.learning.onnx_export import export_onnx
 from rayreach.learning.policy import load_policy
 from rayreach.planners.drl import shipped_model
 from rayreach.robots.urdf import TOOL_LINK
-from scenes import plate_over_the_tip, wall_before_the_goal
+from scenes import box_beside_the_forearm, plate_over_the_tip, wall_before_the_goal
 
 
 @pytest.mark.parametrize("robot, scenario", [("ur5", "exp1"), ("kr16", "exp4")])
@@ -226,10 +226,11 @@ def test_a_policy_with_arm_rays_reads_them_after_the_129(tmp_path):
     from rayreach.env.observation import ObservationConfig
 
     def readings(reach, controller, k):
+        assert (reach._extra_fractions < 1).sum() >= 2 or k  # the box is in their sight
         return np.r_[reach._ray_fractions, reach._extra_fractions], "fraction"
 
     _follow_beside_the_env(tmp_path, ObservationConfig(motion=True, arm_rays=True, sightings=2),
-                           plate_over_the_tip(back=0.05, centre_out=0.1, half=0.07), 193,
+                           box_beside_the_forearm(0.12), 193,
                            "readings must hold the 129 rays, then the 64 arm-rays rays", readings, 20)
 
 

@@ -10,7 +10,7 @@ import pytest
 from rayreach.env.observation import NEAR, WALL_RANGE, ObservationConfig
 from rayreach.env.reach import OBS_SIZE, ReachEnv
 from rayreach.sim.sensors import N_RAYS, N_TIP_BACK
-from scenes import plate_over_the_tip
+from scenes import box_beside_the_forearm, plate_over_the_tip
 
 
 def test_the_default_is_the_papers_observation():
@@ -232,5 +232,38 @@ def test_the_latest_sighting_is_the_nearest_hit_pybullet_finds_on_every_ray_the_
         seen = env.ee_pos + RAY_RANGE * part[0, :3]
         assert min(np.linalg.norm(seen - point) for point in nearest) < 1e-5
         assert part[0, 3] == 1.0 and np.all(part[1] == 0.0)
+    finally:
+        env.close()
+
+
+def test_the_arm_rays_read_a_box_beside_the_forearm_and_sight_it():
+    """A box 0.12 m from the forearm's axis, square to its rays of azimuth 90 deg: of the 64
+    arm rays (after the tip-back ones), the forearm's two middle rings read 0.12 m in that
+    azimuth, PyBullet's ``rayTestBatch`` along them agrees, and the latest sighting is
+    the point they hit (clipped, as every sighting, to the range's box round the tip)."""
+    import pybullet as p
+
+    from rayreach.sim.scene import OBSTACLE_GROUP
+    from rayreach.sim.sensors import ARM_AZIMUTHS, ARM_STATIONS, N_ARM, RAY_RANGE
+
+    config = replace(ObservationConfig.planner(), arm_rays=True, sightings=1)
+    env = ReachEnv(scenario=box_beside_the_forearm(0.12), observation=config)
+    try:
+        obs, _ = env.reset(seed=0)
+        start = OBS_SIZE + replace(config, arm_rays=False, sightings=0).extra_size(N_RAYS)
+        arm = obs[start:start + N_ARM].reshape(2, ARM_STATIONS, ARM_AZIMUTHS)
+        expected = np.ones_like(arm)
+        expected[1, 1:3, 2] = 0.12 / RAY_RANGE
+        np.testing.assert_allclose(arm, expected, atol=1e-6)
+        origins, directions = env._extra_rays
+        origins, directions = origins[-N_ARM:], directions[-N_ARM:]
+        hits = p.rayTestBatch(origins.tolist(), (origins + RAY_RANGE * directions).tolist(),
+                              collisionFilterMask=OBSTACLE_GROUP, physicsClientId=env.scene.client)
+        np.testing.assert_allclose([1.0 if h[0] < 0 else h[2] for h in hits], arm.ravel(), atol=1e-6)
+        ray = ARM_STATIONS * ARM_AZIMUTHS + ARM_AZIMUTHS + 2
+        assert obs[-1] == 1.0
+        # where it was seen relative to the tip, over the range and clipped (the forearm is farther)
+        sighted = [np.clip((np.array(hits[r][3]) - env.ee_pos) / RAY_RANGE, -1, 1) for r in (ray, ray + ARM_AZIMUTHS)]
+        assert min(np.abs(obs[-4:-1] - point).max() for point in sighted) < 1e-6
     finally:
         env.close()

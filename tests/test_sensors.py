@@ -499,9 +499,14 @@ def _arm_rays(rig) -> RayModel:
     return RayModel.extra(rig.spec, RAY_RANGE, ["arm_rays"])
 
 
+NEXT_LINK = {("kr16", "link_3"): ("link_4",)}
+"""Links an arm mount's rings run on into."""
+
+
 def test_arm_rays_ring_the_upper_arm_and_the_forearm_from_inside(rig):
-    """Each ring's centre lies inside the arm as PyBullet holds it, and each mount moves with
-    its URDF link: its pose in PyBullet's link frame is the same in every configuration."""
+    """Each ring's centre lies inside its mount's link as PyBullet holds it (the KR16's forearm
+    rings run on into link_4, which turns about their axis), and each mount moves with its
+    URDF link: its pose in PyBullet's link frame is the same in every configuration."""
     from rayreach.sim.sensors import ARM_AZIMUTHS, ARM_MOUNTS, ARM_STATIONS, N_ARM, mount_offset
 
     rng = np.random.default_rng(5)
@@ -515,10 +520,14 @@ def test_arm_rays_ring_the_upper_arm_and_the_forearm_from_inside(rig):
         frames = rig.kin.frames(q)
         origins, directions = rays.world_rays(frames)
         centres = origins[::ARM_AZIMUTHS]
-        for centre in centres:
-            close = p.getClosestPoints(rig.scene.robot, -1, 0.05, collisionShapeB=probe,
-                                       collisionShapePositionB=centre.tolist(), physicsClientId=rig.scene.client)
-            assert min(c[8] for c in close) < -0.01  # over a centimetre inside some link
+        for k, centre in enumerate(centres):
+            mount = rig.spec.mounts[ARM_MOUNTS[k // ARM_STATIONS]]
+            links = {mount.link, *NEXT_LINK.get((rig.name, mount.link), ())}
+            depth = min(c[8] for link in links
+                        for c in p.getClosestPoints(rig.scene.robot, -1, 0.05, linkIndexA=rig.scene.link_indices[link],
+                                                    collisionShapeB=probe, collisionShapePositionB=centre.tolist(),
+                                                    physicsClientId=rig.scene.client))
+            assert depth < -0.01, (mount.link, k)  # over a centimetre inside
         for name in ARM_MOUNTS:
             mount = rig.spec.mounts[name]
             pose = frames[mount.frame] @ mount_offset(mount)
@@ -566,7 +575,9 @@ def test_arm_rays_see_a_box_beside_the_upper_arm_that_no_paper_ray_sees(rigs, ba
 
 def test_layout_rows_list_the_arm_rays_in_their_mount_frames(capsys):
     """``rayreach rays --arm-rays``: the 64 rays follow the 129, each with its mount's link and
-    chain frame and no place in the flange frame, which moves against them."""
+    chain frame and no place in the flange frame, which moves against them. The KR16's upper
+    arm runs along -x of chain frame 2, 0.15 m beside the joint axes; its forearm along z of
+    chain frame 3; the rings sit at the middles of the links' quarters."""
     from rayreach.cli import main
     from rayreach.robots import get_robot
     from rayreach.sim.sensors import N_ARM, layout_rows
@@ -577,6 +588,12 @@ def test_layout_rows_list_the_arm_rays_in_their_mount_frames(capsys):
     assert len(arm) == N_ARM and {r["sensor"] for r in arm} == {"arm-rays"}
     assert [r["frame"] for r in arm] == [2] * 32 + [3] * 32
     assert all(r["origin_flange"] is None and r["direction_flange"] is None for r in arm)
+    quarters = (np.arange(4) + 0.5) / 4
+    upper = np.array([r["origin_chain"] for r in arm[:32:8]])
+    np.testing.assert_allclose(upper, np.stack((-0.68 * quarters, np.zeros(4), np.full(4, -0.15)), axis=1), atol=1e-6)
+    fore = np.array([r["origin_chain"] for r in arm[32::8]])
+    np.testing.assert_allclose(fore, np.stack((np.zeros(4), np.zeros(4), 0.67 * quarters), axis=1), atol=1e-6)
+    np.testing.assert_allclose([r["direction_chain"][2] for r in arm[32:]], 0.0, atol=1e-6)  # square to the forearm
     assert main(["rays", "--robot", "kr16", "--arm-rays"]) == 0
     printed = capsys.readouterr().out.splitlines()
     assert printed[-1].split()[:4] == [str(N_RAYS + N_ARM - 1), "arm-rays", "link_3", "3"]

@@ -367,7 +367,7 @@ def build_parser() -> argparse.ArgumentParser:
     rays = sub.add_parser("rays", help="the 129 rays a real arm mounts or emulates: order, mount, frame, origin, direction")
     rays.add_argument("--robot", default="ur5", help=ROBOT_HELP)
     rays.add_argument("--json", action="store_true", help="print one JSON list, one object per ray")
-    rays.add_argument("--plot", type=Path, default=None, metavar="PNG", help="also draw the layout to this file")
+    rays.add_argument("--plot", type=Path, default=None, metavar="PNG", help="also draw the paper's 129 in the flange frame to this file")
     rays.add_argument("--tip-back", action="store_true",
                       help="also the 24 tip-back rays (129-152) that a policy of the default recipe reads")
     rays.add_argument("--slanted", action="store_true",
@@ -917,14 +917,13 @@ def _rays(args: argparse.Namespace) -> int:
         print(json.dumps(rows))
         return 0
     print(f"{spec.name}: {len(rows)} rays, range {RAY_RANGE} m; origin and direction in the flange frame "
-          f"({spec.flange_link}, chain frame {spec.n_joints}, z along the tool), or in the mount frame of a "
-          "mount elsewhere (frame = its chain frame; --json gives the mount's offset)")
+          f"({spec.flange_link}, chain frame {spec.n_joints}, z along the tool), or, for a mount elsewhere, in "
+          "the chain frame it moves with (docs/kinematics.md; --json adds each ray in its mount's own frame)")
     print(f"{'ray':>3}  {'sensor':<10} {'mount link':<14} {'frame':>5}  {'origin (m)':<26} direction")
     for r in rows:
-        flange = r["origin_flange"] is not None
-        origin = " ".join(f"{v:+.3f}" for v in (r["origin_flange"] if flange else r["origin"]))
-        direction = " ".join(f"{v:+.3f}" for v in (r["direction_flange"] if flange else r["direction"]))
-        frame = "flange" if flange else f"{r['frame']}"
+        origin = " ".join(f"{v:+.3f}" for v in r["origin_chain"])
+        direction = " ".join(f"{v:+.3f}" for v in r["direction_chain"])
+        frame = "flange" if r["origin_flange"] is not None else f"{r['frame']}"
         print(f"{r['index']:>3}  {r['sensor']:<10} {r['link']:<14} {frame:>6} {origin:<26} {direction}")
     return 0
 

@@ -176,23 +176,26 @@ def mount_offset(mount: SensorMount) -> np.ndarray:
 
 def layout_rows(spec: RobotSpec, extra: Iterable[str] = ()) -> list[dict]:
     """Every ray in observation order, as a user mounts or emulates it: its sensor, the mount's
-    link and chain frame, its origin and unit direction in the mount frame and, for a mount on
-    the flange, in the flange frame (chain frame n, the tool's axis along +z; None elsewhere).
-    ``extra``: then the rays of those ``EXTRA_RAYS`` sets (indices from 129, in that table's
-    order), which a policy observing them reads too."""
+    link and chain frame, its origin and unit direction in the mount frame, in that chain
+    frame (``origin_chain``, ``direction_chain``) and, for a mount on the flange, in the flange
+    frame (chain frame n, the tool's axis along +z; None elsewhere). ``extra``: then the rays
+    of those ``EXTRA_RAYS`` sets (indices from 129, in that table's order), which a policy
+    observing them reads too."""
     groups = [(group, sensor) for group, sensor in zip(ray_layout(spec), SENSOR_SLICES)]
     groups += [(group, name) for name, _, layout in extra_sets(extra) for group in layout(spec)]
     rows = []
     for group, sensor in groups:
         mount = spec.mounts[group.mount]
-        offset = mount_offset(mount) if mount.frame == spec.n_joints else None
+        offset = mount_offset(mount)
+        flange = mount.frame == spec.n_joints
         for origin, direction in zip(group.origins, group.directions):
+            origin_chain = (offset[:3, :3] @ origin + offset[:3, 3]).round(6).tolist()
+            direction_chain = (offset[:3, :3] @ direction).round(6).tolist()
             rows.append({"index": len(rows), "sensor": sensor, "mount": group.mount, "link": mount.link,
                          "frame": mount.frame, "origin": origin.round(6).tolist(),
-                         "direction": direction.round(6).tolist(),
-                         "origin_flange": None if offset is None
-                         else (offset[:3, :3] @ origin + offset[:3, 3]).round(6).tolist(),
-                         "direction_flange": None if offset is None else (offset[:3, :3] @ direction).round(6).tolist()})
+                         "direction": direction.round(6).tolist(), "origin_chain": origin_chain,
+                         "direction_chain": direction_chain, "origin_flange": origin_chain if flange else None,
+                         "direction_flange": direction_chain if flange else None})
     return rows
 
 
