@@ -83,3 +83,11 @@ def test_obstacle_curriculum_rises_on_true_size_episodes_and_falls_on_all():
         c.record(False, at_true_size=False)
     assert c.count == 1  # any 10 episodes below 30 % lower it
     assert ObstacleCurriculum.from_state(c.state()).state() == c.state()
+
+
+def test_a_mixed_count_spreads_the_worlds_evenly_over_one_to_the_count():
+    mixed = ObstacleParams(start=3, minimum=3, maximum=3, mix=True)
+    assert mixed.world_counts(3, 7) == [1, 2, 3, 1, 2, 3, 1]
+    assert mixed.world_counts(1, 3) == [1, 1, 1]
+    assert mixed.world_counts(0, 2) == [0, 0]
+    assert ObstacleParams().world_counts(2, 3) == [2, 2, 2]

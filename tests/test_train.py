@@ -433,3 +433,28 @@ def test_a_cover_speed_reaches_the_training_worlds_and_survives_a_resume():
     assert config_from_meta(meta) == config
     with pytest.raises(ValueError, match=r"cover_speed must be \(low, high\).*got \(0.2, 0.1\)"):
         recipe("default", cover_speed=(0.2, 0.1))
+
+
+def test_an_obstacle_mix_puts_the_worlds_at_one_to_n_obstacles(tmp_path, monkeypatch, capsys):
+    """``--obstacle-mix 3``: of six batched worlds two train at each of one, two and three
+    obstacles, and the run's command says so."""
+    from rayreach.cli import main
+    from rayreach.env.batched import BatchedReachEnv
+
+    pushed: dict[int, int] = {}
+    original = BatchedReachEnv.set_n_obstacles
+
+    def spy(self, n, indices=None):
+        original(self, n, indices)
+        pushed.update({i: int(n) for i in self._get_indices(indices)})
+
+    monkeypatch.setattr(BatchedReachEnv, "set_n_obstacles", spy)
+    out = tmp_path / "mix"
+    assert main(["train", "--robot", "ur5", "--obstacle-mix", "3", "--timesteps", "256", "--envs", "6",
+                 "--workers", "1", "--out", str(out), "--checkpoint-every", "256"]) == 0
+    assert pushed == {0: 1, 1: 2, 2: 3, 3: 1, 4: 2, 5: 3}
+    meta, _ = read_bundle_meta(out / "model.zip")
+    assert meta["config"]["obstacles"]["mix"] and meta["state"]["obstacles"]["count"] == 3
+    assert " --obstacle-mix 3 " in train_command(meta["config"], "RUN")
+    assert main(["train", "--robot", "ur5", "--obstacle-mix", "3", "--obstacles", "2", "--out", str(tmp_path / "x")]) == 2
+    assert "give one" in capsys.readouterr().err

@@ -208,6 +208,9 @@ def build_parser() -> argparse.ArgumentParser:
     train.add_argument("--separate-features", action="store_true", help="actor and critic get their own extractor")
     train.add_argument("--obstacles", type=int, default=None,
                        help="fix the obstacle count (no obstacle curriculum; also holds a resumed run's count)")
+    train.add_argument("--obstacle-mix", type=int, default=None, metavar="N",
+                       help="spread the worlds evenly over 1 to N obstacles, for the whole run (no obstacle "
+                            "curriculum; also changes a resumed run)")
     train.add_argument("--tip-back", action=argparse.BooleanOptionalAction, default=None,
                        help="read the 24 tip-back rays (default: the recipe's for the robot; a resumed run keeps "
                             "its own observation)")
@@ -696,8 +699,15 @@ def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
         overrides["extra_kinds"] = _names(args.extra_kinds)
     if args.cover_speed is not None:
         overrides["cover_speed"] = _speed_range(args.cover_speed)
+    if args.obstacles is not None and args.obstacle_mix is not None:
+        raise ValueError("--obstacles puts every world at one count and --obstacle-mix spreads them: give one")
     if args.obstacles is not None:
         overrides["obstacles"] = ObstacleParams(start=args.obstacles, minimum=args.obstacles, maximum=args.obstacles)
+    if args.obstacle_mix is not None:
+        if args.obstacle_mix < 1:
+            raise ValueError(f"--obstacle-mix must be >= 1, got {args.obstacle_mix}")
+        n = args.obstacle_mix
+        overrides["obstacles"] = ObstacleParams(start=n, minimum=n, maximum=n, mix=True)
     if args.goal_size is not None:
         config = replace(config, goal=GoalSizeParams(rho=args.goal_size, e_zeta=2**62))
     if args.true_goal_share is not None:

@@ -54,7 +54,7 @@ def train_command(config: dict, out: str | Path) -> str:
         command += f" --start-decisions {length}"
     obstacles = config.get("obstacles", {})
     if obstacles and obstacles["minimum"] == obstacles["maximum"] == obstacles["start"]:
-        command += f" --obstacles {obstacles['start']}"
+        command += f" --{'obstacle-mix' if obstacles.get('mix') else 'obstacles'} {obstacles['start']}"
     return command + " [--resume]"
 
 

@@ -621,7 +621,10 @@ def _make_callback(config: TrainConfig, state: TrainState, out: Path, total: int
             if goal:
                 self.training_env.env_method("set_goal_tolerance", state.goal.size)
             if obstacles:
-                self.training_env.env_method("set_n_obstacles", state.obstacles.count)
+                counts = state.obstacles.params.world_counts(state.obstacles.count, self.training_env.num_envs)
+                for count in sorted(set(counts)):
+                    self.training_env.env_method("set_n_obstacles", count,
+                                                 indices=[i for i, c in enumerate(counts) if c == count])
 
         def _on_step(self) -> bool:
             ended = np.flatnonzero(self.locals["dones"])
