@@ -44,11 +44,11 @@ def wall_before_the_goal(wall_at: float, goal_out: float, reach_up: float):
                           spec.workspace_low, spec.workspace_high, "a wall between the tip and the goal")
 
 
-def box_beside_the_forearm(gap: float):
+def box_beside_the_forearm(gap: float, along: float = 0.5, side: float = 1.0):
     """UR5 at its home joints with a box whose near face lies ``gap`` m from the forearm's
-    axis at the middle of its length, square to the forearm mount's y axis (the way its
-    rays of azimuth 90 deg leave it), 0.2 m long along the forearm; the goal 0.3 m out along the
-    tool frame's x."""
+    axis, its middle ``along`` the forearm's length from the wrist, square to the forearm
+    mount's y axis (``side`` +1: the way its rays of azimuth 90 deg leave it, -1: 270 deg),
+    0.1 m wide, 0.2 m long along the forearm; the goal 0.3 m out along the tool frame's x."""
     from rayreach.robots import get_robot
     from rayreach.scenarios.random_world import drawn_scenario
     from rayreach.scenarios.schema import ObstacleSpec
@@ -60,10 +60,10 @@ def box_beside_the_forearm(gap: float):
     kin = Kinematics(spec)
     mount = spec.mounts["forearm"]
     pose = kin.frames(np.asarray(spec.home))[mount.frame] @ mount_offset(mount)
-    side, axis = pose[:3, 1], pose[:3, 2]
+    side, axis = side * pose[:3, 1], pose[:3, 2]
     half = 0.05
-    centre = pose[:3, 3] + 0.5 * mount.length * axis + (gap + half) * side
-    box = ObstacleSpec("box", tuple(centre), rpy=tuple(matrix_to_rpy(pose[:3, :3])), half_extents=(0.1, half, 0.1),
+    centre = pose[:3, 3] + along * mount.length * axis + (gap + half) * side
+    box = ObstacleSpec("box", tuple(centre), rpy=tuple(matrix_to_rpy(pose[:3, :3])), half_extents=(half, half, 0.1),
                        name="box_0")
     tip = kin.fk(np.asarray(spec.home))
     return drawn_scenario("box", "ur5", np.asarray(spec.home), tip[:3, 3] + 0.3 * tip[:3, 0], [box],

@@ -257,3 +257,11 @@ def test_a_policy_with_goal_rays_reads_them_last_in_fractions_or_metres(tmp_path
     _follow_beside_the_env(tmp_path, ObservationConfig(motion=True, goal_sight=True), wall_before_the_goal(0.1, 0.2, 0.1),
                            132, "readings must hold the 129 rays, then the 3 goal rays", readings, 30)
     assert any(seen)  # the wall stood between the tool and the goal
+
+
+def test_the_arm_rules_arm_rays_are_refused_on_a_real_arm_by_name():
+    from dataclasses import replace
+
+    acting = ActingConfig()
+    with pytest.raises(ValueError, match="SafetyLayer.arm_rays is not on a real arm"):
+        ArmController("ur5", acting=replace(acting, safety=replace(acting.safety, arm_rays=True)))

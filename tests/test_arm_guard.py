@@ -288,3 +288,39 @@ def test_arm_rule_settings_are_checked():
         SafetyLayer(guard_tool="yes")
     with pytest.raises(ValueError, match="tool_clearance must be > 0"):
         SafetyLayer(tool_clearance=0.0)
+
+
+@pytest.mark.parametrize("arm_rays", [False, True])
+def test_with_the_arm_rays_the_rule_keeps_the_forearm_off_a_box_no_tool_ray_sees(arm_rays):
+    """A box 6 cm from the UR5 forearm's axis near the elbow, where none of the 129 rays look:
+    with ``SafetyLayer.arm_rays`` its face enters the seen points and an elbow step that
+    swings the forearm towards it is refused, one away is taken; without, the rule knows
+    nothing of it. The upper arm is guarded only with the arm rays."""
+    from scenes import box_beside_the_forearm
+
+    box_face_gap = 0.06
+    scenario = box_beside_the_forearm(box_face_gap, along=0.8, side=-1.0)
+    layer = SafetyLayer(arm_clearance=0.01, arm_rays=arm_rays)
+    env = ActingEnv(ReachEnv(scenario=scenario), layers(safety=layer))
+    reach = env.unwrapped
+    try:
+        env.reset(seed=0)
+        rule = next(c for c in env.components if isinstance(c, ArmRule))
+        assert ("upper_arm_link" in rule.capsules.names) == arm_rays
+        points = env.memory.seen_points(100)
+        box = scenario.obstacles[0]
+        centre, rot = np.asarray(box.position), np.asarray(p.getMatrixFromQuaternion(
+            p.getQuaternionFromEuler(box.rpy))).reshape(3, 3)
+        local = (points - centre) @ rot
+        on_box = np.all(np.abs(local) <= np.asarray(box.half_extents) + 1e-6, axis=1)
+        assert on_box.sum() >= 2 if arm_rays else on_box.sum() == 0  # the rings that face it
+        q = reach.q.copy()
+        mid = reach.kin.frames(q)[3][:3, 3]  # the wrist end of the forearm
+        toward = np.zeros(6)
+        toward[2] = 0.05  # the elbow
+        if np.linalg.norm(reach.kin.frames(q + toward)[3][:3, 3] - centre) > np.linalg.norm(mid - centre):
+            toward = -toward
+        assert rule.guard.allows(q, q - toward, points)
+        assert rule.guard.allows(q, q + toward, points) != arm_rays
+    finally:
+        env.close()

@@ -298,6 +298,9 @@ def build_parser() -> argparse.ArgumentParser:
                            "UR5 0.1, KR16 0.2)")
     roll.add_argument("--no-turn", action="store_true",
                       help="the final approach never turns the tool towards its path (FinalApproach.turn)")
+    roll.add_argument("--guard-arm-rays", action="store_true",
+                      help="the arm's rule also reads rays round the upper arm and the forearm and keeps those "
+                           "links clear (SafetyLayer.arm_rays)")
     roll.add_argument("--give-way", action="store_true",
                       help="the final approach leaves the goal to the policy once a veto held one of its steps "
                            "(FinalApproach.give_way)")
@@ -800,7 +803,8 @@ def acting_from_args(args: argparse.Namespace):
     from rayreach.acting.shield import SafetyLayer
 
     safety = SafetyLayer(args.workspace_guard, args.ray_shield, args.slide, args.memory_steps, args.arm_clearance,
-                         guard_tool=not args.no_guard_tool, tool_clearance=args.tool_clearance)
+                         guard_tool=not args.no_guard_tool, tool_clearance=args.tool_clearance,
+                         arm_rays=args.guard_arm_rays)
     config = ActingConfig(final_approach=FinalApproach(args.final_approach_radius, stall_steps=args.stall_steps,
                                                        turn=not args.no_turn, give_way=args.give_way),
                           safety=safety, detour=Detour(stall_steps=args.detour_steps))

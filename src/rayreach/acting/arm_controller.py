@@ -113,6 +113,9 @@ class ArmController:
         self.extra_rays = RayModel.extra(self.spec, ray_range, observation.ray_sets)
         self.ray_range, self.goal_tolerance, self.ik = float(ray_range), float(goal_tolerance), ik
         self.acting = acting
+        if acting.safety.arm_rays and acting.safety.arm_clearance > 0:
+            raise ValueError("SafetyLayer.arm_rays is not on a real arm yet: ArmController takes no readings of "
+                             "the rays round the upper arm and the forearm; switch it off")
         if capsules is None and acting.safety.arm_clearance > 0:
             capsules = ChainCapsules.shipped(self.kin, (*self.spec.blind_links, TOOL_LINK))
         self.components, self.final_approach, _ = acting_components(acting, self.spec, self.ray_range,

@@ -25,9 +25,20 @@ from typing import Protocol
 
 import numpy as np
 
+from rayreach.robots.spec import RobotSpec
 from rayreach.robots.urdf import TOOL_LINK
 from rayreach.sim.geometry import distances_to_segment
 from rayreach.sim.kinematics import Kinematics
+from rayreach.sim.sensors import ARM_MOUNTS
+
+def guarded_links(spec: RobotSpec, arm_rays: bool) -> tuple[str, ...]:
+    """The links the arm's rule keeps clear: the robot's blind links, with ``arm_rays``
+    (``SafetyLayer.arm_rays``) the links its rays round the arm are mounted on too, then the tool."""
+    links = list(spec.blind_links)
+    if arm_rays:
+        links += [link for link in dict.fromkeys(spec.mounts[m].link for m in ARM_MOUNTS) if link not in links]
+    return (*links, TOOL_LINK)
+
 
 CAPSULE_FILE = "arm_capsules.json"
 """Package data of ``rayreach.models``: each robot's capsules in its chain frames, fitted with

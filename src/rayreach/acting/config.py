@@ -73,7 +73,7 @@ class ActingConfig:
         if "workspace_guard" in names:
             safety = replace(safety, workspace_guard=0.0)
         if "arm_guard" in names:
-            safety = replace(safety, arm_clearance=0.0, guard_tool=False, tool_clearance=None)
+            safety = replace(safety, arm_clearance=0.0, guard_tool=False, tool_clearance=None, arm_rays=False)
         if "final_approach" in names:
             config = replace(config, final_approach=None)
         if "detour" in names:

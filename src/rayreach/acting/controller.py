@@ -10,19 +10,22 @@ chose the executed motion (``rayreach.acting.config.SOURCES``) and whether the a
 
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 from gymnasium.wrappers import OrderEnforcing, PassiveEnvChecker
 
+from rayreach.acting.arm_guard import guarded_links
 from rayreach.acting.config import ActingConfig
 from rayreach.acting.layers import acting_components
 from rayreach.acting.memory import RayMemory
 from rayreach.acting.mesh_capsules import ArmCapsules
 from rayreach.acting.pipeline import SHORTER, Episode, choose, held_by
+from rayreach.env.perception import Perception
 from rayreach.env.reach import ReachEnv
-from rayreach.robots.urdf import TOOL_LINK
+from rayreach.sim.sensors import RayModel, arm_layout
 
 __all__ = ["PASSED_WRAPPERS", "SHORTER", "ActingEnv"]
 
@@ -48,8 +51,11 @@ class ActingEnv(gym.Wrapper):
         self.reach = reach
         self.config = config
         spec = reach.spec_robot
-        capsules = (ArmCapsules(reach.scene, (*spec.blind_links, TOOL_LINK)) if config.safety.arm_clearance > 0
-                    else None)
+        guard = config.safety.arm_clearance > 0
+        self._arm_rays = (RayModel(spec, reach.config.ray_range, arm_layout(spec))
+                          if guard and config.safety.arm_rays else None)
+        """The rays round the upper arm and the forearm that the arm's rule reads (``SafetyLayer.arm_rays``)."""
+        capsules = ArmCapsules(reach.scene, guarded_links(spec, self._arm_rays is not None)) if guard else None
         self.components, self.final_approach, self.radii = acting_components(
             config, spec, reach.config.ray_range, reach.config.rewards, capsules)
         """The pipeline; the final approach as applied (the robot's step, tool and radii filled
@@ -66,13 +72,24 @@ class ActingEnv(gym.Wrapper):
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         obs, info = self.env.reset(seed=seed, options=options)
         memory = RayMemory()
-        memory.add(self.reach.perceive(), moved=True)
+        memory.add(self._perceive(), moved=True)
         self._episode = Episode(memory, [info["distance"]], self.reach.step_scale)
         self._env_episode = self.reach.episodes
         self._goal_index = 0
         for component in self.components:
             component.reset(self._episode)
         return obs, info
+
+    def _perceive(self) -> Perception:
+        """The env's perception, with what the arm's rays see where the arm's rule reads them."""
+        now = self.reach.perceive()
+        if self._arm_rays is None:
+            return now
+        reach, ray_range = self.reach, self.reach.config.ray_range
+        origins, directions = self._arm_rays.world_rays(reach.frames)
+        fractions = reach.caster.cast(origins, directions, ray_range)
+        hit = fractions < 1.0
+        return replace(now, arm_points=origins[hit] + directions[hit] * (fractions[hit] * ray_range)[:, None])
 
     def step(self, action: np.ndarray):
         reach, episode = self.reach, self._episode
@@ -84,7 +101,7 @@ class ActingEnv(gym.Wrapper):
         taken = chosen.taken
         q_before = reach.q
         obs, reward, terminated, truncated, info = reach.advance(chosen.ik, taken)
-        episode.memory.add(reach.perceive(), moved=taken)
+        episode.memory.add(self._perceive(), moved=taken)
         if info["goal_index"] != self._goal_index:
             self._goal_index, episode.distances, episode.refused = info["goal_index"], [], set()
         episode.distances.append(info["distance"])

@@ -60,15 +60,17 @@ class RayMemory:
         return self.scans[max(0, len(self.scans) - 1 - steps):-1] if steps > 0 else []
 
     def seen_points(self, steps: int) -> np.ndarray:
-        """The world points the rays hit in the last ``steps`` scans taken after the arm moved,
-        the current one included when it did, oldest first, (n, 3) (the arm's rule's view:
-        a held arm sees what it saw, and the memory ages only as the arm moves)."""
+        """The world points the rays hit (and the arm's rays, ``Perception.arm_points``) in the
+        last ``steps`` scans taken after the arm moved, the current one included when it did,
+        oldest first, (n, 3) (the arm's rule's view: a held arm sees what it saw, and the
+        memory ages only as the arm moves)."""
         steps = int(steps)
         if steps <= 0:
             return np.zeros((0, 3))
         key = (len(self.scans), steps)
         if self._points is None or self._points[:2] != key:
             kept = self._moving[-steps:]
-            points = [self.scans[i].perception.hit_points for i in kept]
+            points = [seen for i in kept
+                      for seen in (self.scans[i].perception.hit_points, self.scans[i].perception.arm_points)]
             self._points = (*key, np.concatenate(points) if points else np.zeros((0, 3)))
         return self._points[2]

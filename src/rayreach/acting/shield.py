@@ -59,6 +59,12 @@ class SafetyLayer:
     with the tool's shape already and may pass a wall nearer than ``arm_clearance``. A thin
     plate seen edge-on slips between the rays; a tool that saw it a few steps earlier swept
     its side into it (docs/acting.md)."""
+    arm_rays: bool = False
+    """The arm's rule also keeps the upper arm and the forearm clear, of what the tool's rays
+    saw and of what the rays round those two links see (``rayreach.sim.sensors.arm_layout``,
+    cast for the rule whether the policy reads them or not). In broad worlds those links
+    touched something in about two of five collisions (docs/training.md, "What the arm
+    hits"), often a shelf or wall the tool never came near."""
     tool_clearance: float | None = None
     """The clearance, m, the arm's rule keeps the tool at when ``guard_tool`` is set; None:
     ``arm_clearance``. The tool and the arm links are each held to their own: a plate's

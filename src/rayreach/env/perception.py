@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import cached_property
 
 import numpy as np
@@ -34,6 +34,9 @@ class Perception:
     workspace_low: np.ndarray
     workspace_high: np.ndarray
     """The workspace box, m (3,) each."""
+    arm_points: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    """Points the rays round the upper arm and the forearm see, in the world, m (k, 3):
+    where the arm's rule reads them (``SafetyLayer.arm_rays``), else none."""
 
     @property
     def goal_offset(self) -> np.ndarray:
