@@ -52,7 +52,8 @@ def test_shipped_policy_loads_with_metadata_and_runs_an_episode(robot, scenario)
     assert share["policy"] * record.steps == pytest.approx(round(share["policy"] * record.steps))
     assert record.config["safety"] == {"workspace_guard": 0.01, "ray_shield": 0.05, "slide": 0.1, "memory_steps": 10,
                                        "arm_clearance": 0.01, "arm_memory_steps": 100,
-                                       "guard_tool": True, "tool_clearance": 0.02}  # the executor's defaults
+                                       "guard_tool": True, "arm_rays": False,
+                                       "tool_clearance": 0.02}  # the executor's defaults
     spec, radii = get_robot(robot), ROBOT_RADII[robot]  # the robot's step and tool, the acting radii
     assert record.config["final_approach"] == {"radius": radii.radius, "margin": FinalApproach.margin,
                                                "ee_step": 0.005, "rot_step": spec.rot_step,
