@@ -315,10 +315,10 @@ def test_with_the_arm_rays_the_rule_keeps_the_forearm_off_a_box_no_tool_ray_sees
         on_box = np.all(np.abs(local) <= np.asarray(box.half_extents) + 1e-6, axis=1)
         assert on_box.sum() >= 2 if arm_rays else on_box.sum() == 0  # the rings that face it
         q = reach.q.copy()
-        mid = reach.kin.frames(q)[3][:3, 3]  # the wrist end of the forearm
+        wrist_end = reach.kin.frames(q)[3][:3, 3]  # the forearm's end at the wrist
         toward = np.zeros(6)
         toward[2] = 0.05  # the elbow
-        if np.linalg.norm(reach.kin.frames(q + toward)[3][:3, 3] - centre) > np.linalg.norm(mid - centre):
+        if np.linalg.norm(reach.kin.frames(q + toward)[3][:3, 3] - centre) > np.linalg.norm(wrist_end - centre):
             toward = -toward
         assert rule.guard.allows(q, q - toward, points)
         assert rule.guard.allows(q, q + toward, points) != arm_rays

@@ -33,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from rayreach.acting.arm_guard import ChainCapsules
+from rayreach.acting.arm_guard import ChainCapsules, guarded_links
 from rayreach.acting.config import ActingConfig
 from rayreach.acting.layers import acting_components
 from rayreach.acting.memory import RayMemory
@@ -43,7 +43,6 @@ from rayreach.env.observation import OBS_SIZE, ONE_WORLD, Observer, one_world_si
 from rayreach.env.perception import Perception
 from rayreach.env.rewards import RewardWeights
 from rayreach.robots import RobotSpec, get_robot
-from rayreach.robots.urdf import TOOL_LINK
 from rayreach.sim.goal_rays import N_GOAL_RAYS, SHORTEST, goal_rays
 from rayreach.sim.kinematics import STEP_IK, IKParams, IKResult, Kinematics
 from rayreach.sim.sensors import N_RAYS, RAY_RANGE, RayModel, extra_sets
@@ -117,7 +116,7 @@ class ArmController:
             raise ValueError("SafetyLayer.arm_rays is not on a real arm yet: ArmController takes no readings of "
                              "the rays round the upper arm and the forearm; switch it off")
         if capsules is None and acting.safety.arm_clearance > 0:
-            capsules = ChainCapsules.shipped(self.kin, (*self.spec.blind_links, TOOL_LINK))
+            capsules = ChainCapsules.shipped(self.kin, guarded_links(self.spec, arm_rays=False))
         self.components, self.final_approach, _ = acting_components(acting, self.spec, self.ray_range,
                                                                     RewardWeights(), capsules)
         self.actor = ActingPolicy(self.policy, deterministic=True, resample=acting.resample)

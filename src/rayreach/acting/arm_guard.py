@@ -31,6 +31,7 @@ from rayreach.sim.geometry import distances_to_segment
 from rayreach.sim.kinematics import Kinematics
 from rayreach.sim.sensors import ARM_MOUNTS
 
+
 def guarded_links(spec: RobotSpec, arm_rays: bool) -> tuple[str, ...]:
     """The links the arm's rule keeps clear: the robot's blind links, with ``arm_rays``
     (``SafetyLayer.arm_rays``) the links its rays round the arm are mounted on too, then the tool."""

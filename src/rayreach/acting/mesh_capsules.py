@@ -14,8 +14,7 @@ from pathlib import Path
 import numpy as np
 import pybullet as p
 
-from rayreach.acting.arm_guard import CAPSULE_FILE, near_capsules
-from rayreach.robots.urdf import TOOL_LINK
+from rayreach.acting.arm_guard import CAPSULE_FILE, guarded_links, near_capsules
 from rayreach.sim.geometry import capsule_around
 from rayreach.sim.kinematics import Kinematics
 from rayreach.sim.scene import Scene
@@ -145,7 +144,7 @@ def capsule_table(robots: tuple[str, ...] | None = None) -> dict[str, list[dict]
         spec = get_robot(name)
         scene = Scene(spec)
         try:
-            table[name] = chain_capsule_rows(scene, Kinematics(spec), (*spec.blind_links, TOOL_LINK))
+            table[name] = chain_capsule_rows(scene, Kinematics(spec), guarded_links(spec, arm_rays=False))
         finally:
             scene.close()
     return table
