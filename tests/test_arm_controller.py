@@ -259,9 +259,57 @@ def test_a_policy_with_goal_rays_reads_them_last_in_fractions_or_metres(tmp_path
     assert any(seen)  # the wall stood between the tool and the goal
 
 
-def test_the_arm_rules_arm_rays_are_refused_on_a_real_arm_by_name():
+@pytest.mark.parametrize("policy_reads_them", [False, True])
+def test_the_arm_rules_arm_rays_on_a_real_arm_keep_the_forearm_off_a_box(tmp_path, policy_reads_them):
+    """With ``SafetyLayer.arm_rays`` the controller reads the 64 rays round the upper arm and
+    the forearm (after the policy's own rays, or among them where the policy observes them):
+    fed what PyBullet casts beside a box 6 cm off the forearm, no tool ray seeing it, the box's
+    face enters the seen points and the rule on the shipped capsules (upper arm included)
+    refuses an elbow step towards it and takes one away."""
+    import pybullet as p
     from dataclasses import replace
 
+    from rayreach.acting.layers import ArmRule
+    from rayreach.env.observation import ObservationConfig
+    from rayreach.learning.train import TrainConfig, train
+    from rayreach.sim.sensors import RayModel, arm_layout
+
+    policy = "ur5"
+    if policy_reads_them:
+        config = TrainConfig(robot="ur5", timesteps=64, envs=1, n_steps=64, batch_size=64, n_epochs=1,
+                             observation=ObservationConfig(motion=True, arm_rays=True))
+        policy = load_policy(train(config, tmp_path))
+    scenario = box_beside_the_forearm(0.06, along=0.8, side=-1.0)
     acting = ActingConfig()
-    with pytest.raises(ValueError, match="SafetyLayer.arm_rays is not on a real arm"):
-        ArmController("ur5", acting=replace(acting, safety=replace(acting.safety, arm_rays=True)))
+    acting = replace(acting, safety=replace(acting.safety, arm_clearance=0.01, arm_rays=True))
+    reach = ReachEnv(scenario=scenario)
+    try:
+        reach.reset(seed=0)
+        q = reach.q.copy()
+        spec = reach.spec_robot
+        origins, directions = RayModel(spec, reach.config.ray_range, arm_layout(spec)).world_rays(reach.frames)
+        arm = reach.caster.cast(origins, directions, reach.config.ray_range)
+        assert (arm < 1).sum() >= 2  # the rings facing the box
+        controller = ArmController(policy, acting=acting, base_position=scenario.base_position,
+                                   base_rpy=scenario.base_rpy)
+        assert controller.n_readings == 129 + 64
+        controller.reset(q, reach.goals[0], scenario.workspace_low, scenario.workspace_high)
+        with pytest.raises(ValueError, match=re.escape("the 129 rays, then the 64 arm-rays rays")):
+            controller.step(q, reach._ray_fractions.copy())
+        controller.step(q, np.r_[reach._ray_fractions, arm])
+    finally:
+        reach.close()
+    rule = next(c for c in controller.components if isinstance(c, ArmRule))
+    assert "upper_arm_link" in rule.capsules.names
+    points = controller._episode.memory.seen_points(100)
+    box = scenario.obstacles[0]
+    rot = np.asarray(p.getMatrixFromQuaternion(p.getQuaternionFromEuler(box.rpy))).reshape(3, 3)
+    local = (points - np.asarray(box.position)) @ rot
+    assert np.all(np.abs(local) <= np.asarray(box.half_extents) + 1e-6, axis=1).sum() >= 2
+    toward = np.zeros(6)
+    toward[2] = 0.05  # the elbow
+    wrist = controller.kin.frames(q)[3][:3, 3]
+    centre = np.asarray(box.position)
+    if np.linalg.norm(controller.kin.frames(q + toward)[3][:3, 3] - centre) > np.linalg.norm(wrist - centre):
+        toward = -toward
+    assert rule.guard.allows(q, q - toward, points) and not rule.guard.allows(q, q + toward, points)

@@ -8,7 +8,9 @@ readings as hit fractions, the policy's observation. Two things differ, both bec
 no simulated scene: the arm's rule measures the seen points against capsules round the links
 (``rayreach.acting.arm_guard.ChainCapsules``, shipped per robot) instead of PyBullet's
 meshes, which never lets a link nearer than the meshes would; and the episode has no
-collision test, which the real arm's own safety provides.
+collision test, which the real arm's own safety provides. Where the arm's rule keeps the upper
+arm and the forearm clear too (``SafetyLayer.arm_rays``), the controller reads the 64 rays
+round those links as well (``n_readings`` says how many readings a step takes).
 
     controller = ArmController("path/to/ur5.onnx")          # or a Policy, or a model .zip
     controller.reset(q_now, goal)
@@ -40,12 +42,12 @@ from rayreach.acting.memory import RayMemory
 from rayreach.acting.pipeline import Episode, choose, held_by
 from rayreach.acting.resample import ActingPolicy
 from rayreach.env.observation import OBS_SIZE, ONE_WORLD, Observer, one_world_sighting, paper_observation
-from rayreach.env.perception import Perception
+from rayreach.env.perception import Perception, seen_points
 from rayreach.env.rewards import RewardWeights
 from rayreach.robots import RobotSpec, get_robot
 from rayreach.sim.goal_rays import N_GOAL_RAYS, SHORTEST, goal_rays
 from rayreach.sim.kinematics import STEP_IK, IKParams, IKResult, Kinematics
-from rayreach.sim.sensors import N_RAYS, RAY_RANGE, RayModel, extra_sets
+from rayreach.sim.sensors import N_ARM, N_RAYS, RAY_RANGE, RayModel, arm_layout, extra_sets
 
 UNITS = ("fraction", "m")
 """How ray readings may come: hit fractions of the range in [0, 1], or metres."""
@@ -112,21 +114,24 @@ class ArmController:
         self.extra_rays = RayModel.extra(self.spec, ray_range, observation.ray_sets)
         self.ray_range, self.goal_tolerance, self.ik = float(ray_range), float(goal_tolerance), ik
         self.acting = acting
-        if acting.safety.arm_rays and acting.safety.arm_clearance > 0:
-            raise ValueError("SafetyLayer.arm_rays is not on a real arm yet: ArmController takes no readings of "
-                             "the rays round the upper arm and the forearm; switch it off")
+        guard_arm = acting.safety.arm_rays and acting.safety.arm_clearance > 0
+        self.arm_rays = RayModel(self.spec, ray_range, arm_layout(self.spec)) if guard_arm else None
+        """The rays round the upper arm and the forearm that the arm's rule reads
+        (``SafetyLayer.arm_rays``): the policy's own where it observes them, else 64 readings more."""
         if capsules is None and acting.safety.arm_clearance > 0:
-            capsules = ChainCapsules.shipped(self.kin, guarded_links(self.spec, arm_rays=False))
+            capsules = ChainCapsules.shipped(self.kin, guarded_links(self.spec, guard_arm))
         self.components, self.final_approach, _ = acting_components(acting, self.spec, self.ray_range,
                                                                     RewardWeights(), capsules)
         self.actor = ActingPolicy(self.policy, deterministic=True, resample=acting.resample)
         self.observer = Observer(self.policy.observation, 1, N_RAYS, OBS_SIZE, self.spec.ee_step)
         self.n_goal_rays = N_GOAL_RAYS * observation.goal_sight
-        self.n_readings = N_RAYS + observation.extra_rays + self.n_goal_rays
+        self.reading_sets = observation.ray_sets + (("arm_rays",) if guard_arm and not observation.arm_rays else ())
+        """The ray sets read after the paper's 129: the policy's, and the arm's rule's."""
+        self.n_readings = N_RAYS + sum(n for _, n, _ in extra_sets(self.reading_sets)) + self.n_goal_rays
         """Ray readings a step takes: the paper's 129, then the rays the policy observes beyond
         them, the 24 tip-back, the 32 slanted and the 64 along the arm (``rayreach rays --tip-back
-        --slanted --arm-rays``), then the 3 aimed at the goal (``goal_rays``); the acting layers read
-        the 129."""
+        --slanted --arm-rays``; the 64 also where only the arm's rule reads them), then the 3
+        aimed at the goal (``goal_rays``); the acting layers read the 129 (and the 64)."""
         self.step_scale = np.array([self.spec.ee_step] * 3 + [self.spec.rot_step] * 3)
         self.seed = seed
         self._goal: np.ndarray | None = None
@@ -189,12 +194,17 @@ class ArmController:
         fractions = self._fractions(readings, unit, distance)
         goal_clear = fractions[None, self.n_readings - self.n_goal_rays:] if self.n_goal_rays else None
         fractions = fractions[: self.n_readings - self.n_goal_rays]
+        arm_points = np.zeros((0, 3))
+        if self.arm_rays is not None:  # the arm's rays are the last before the goal rays (EXTRA_RAYS' order)
+            arm_points = seen_points(*self.arm_rays.world_rays(frames), fractions[-N_ARM:], self.ray_range)
+        fractions = fractions[: N_RAYS + self.policy.observation.extra_rays]
         extra = fractions[None, N_RAYS:] if len(fractions) > N_RAYS else None
         fractions = fractions[:N_RAYS]
         origins, directions = self.rays.world_rays(frames)
         now = Perception(step=self._steps, q=q, ee_position=ee_pos, ee_rotation=ee_rot, goal=self._goal,
                          origins=origins, directions=directions, lengths=fractions * self.ray_range,
-                         fractions=fractions, workspace_low=self._low, workspace_high=self._high)
+                         fractions=fractions, workspace_low=self._low, workspace_high=self._high,
+                         arm_points=arm_points)
         first = self._episode is None
         base = paper_observation(q, self._goal, ee_pos, ee_rot, self._ref_rot_t, distance, fractions)[None]
         nearest = self._nearest(frames, origins, directions, fractions, extra)
@@ -255,7 +265,7 @@ class ArmController:
         if r.shape != (self.n_readings,):
             observation = self.policy.observation
             what = f"{N_RAYS} rays" + "".join(f", then the {n} {name} rays"
-                                              for name, n, _ in extra_sets(observation.ray_sets))
+                                              for name, n, _ in extra_sets(self.reading_sets))
             what += f", then the {N_GOAL_RAYS} goal rays" if self.n_goal_rays else ""
             raise ValueError(f"readings must hold the {what} in the layout's order (docs/rays.md, rayreach rays), "
                              f"got {np.asarray(readings).shape}")

@@ -23,7 +23,7 @@ from rayreach.acting.layers import acting_components
 from rayreach.acting.memory import RayMemory
 from rayreach.acting.mesh_capsules import ArmCapsules
 from rayreach.acting.pipeline import SHORTER, Episode, choose, held_by
-from rayreach.env.perception import Perception
+from rayreach.env.perception import Perception, seen_points
 from rayreach.env.reach import ReachEnv
 from rayreach.sim.sensors import RayModel, arm_layout
 
@@ -88,8 +88,7 @@ class ActingEnv(gym.Wrapper):
         reach, ray_range = self.reach, self.reach.config.ray_range
         origins, directions = self._arm_rays.world_rays(reach.frames)
         fractions = reach.caster.cast(origins, directions, ray_range)
-        hit = fractions < 1.0
-        return replace(now, arm_points=origins[hit] + directions[hit] * (fractions[hit] * ray_range)[:, None])
+        return replace(now, arm_points=seen_points(origins, directions, fractions, ray_range))
 
     def step(self, action: np.ndarray):
         reach, episode = self.reach, self._episode

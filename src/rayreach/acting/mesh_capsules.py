@@ -136,7 +136,8 @@ def chain_capsule_rows(scene: Scene, kin: Kinematics, links: tuple[str, ...]) ->
 
 
 def capsule_table(robots: tuple[str, ...] | None = None) -> dict[str, list[dict]]:
-    """``CAPSULE_FILE``'s content, fitted now: each robot's blind links and its tool."""
+    """``CAPSULE_FILE``'s content, fitted now: each robot's links the arm's rule may keep clear
+    (``guarded_links`` with ``arm_rays``: the blind links, the upper arm, the forearm) and its tool."""
     from rayreach.robots import ROBOTS, get_robot
 
     table = {}
@@ -144,7 +145,7 @@ def capsule_table(robots: tuple[str, ...] | None = None) -> dict[str, list[dict]
         spec = get_robot(name)
         scene = Scene(spec)
         try:
-            table[name] = chain_capsule_rows(scene, Kinematics(spec), guarded_links(spec, arm_rays=False))
+            table[name] = chain_capsule_rows(scene, Kinematics(spec), guarded_links(spec, arm_rays=True))
         finally:
             scene.close()
     return table

@@ -8,6 +8,12 @@ from functools import cached_property
 import numpy as np
 
 
+def seen_points(origins: np.ndarray, directions: np.ndarray, fractions: np.ndarray, ray_range: float) -> np.ndarray:
+    """The world points rays of ``ray_range`` see, m (k, 3): those reading under 1 (of ``fractions``)."""
+    hit = fractions < 1.0
+    return origins[hit] + directions[hit] * (fractions[hit] * ray_range)[:, None]
+
+
 @dataclass(frozen=True)
 class Perception:
     """One step's sensing, computed once (``ReachEnv.perceive``) and shared by every layer that
