@@ -231,7 +231,7 @@ def test_a_policy_with_arm_rays_reads_them_after_the_129(tmp_path):
 
     _follow_beside_the_env(tmp_path, ObservationConfig(motion=True, arm_rays=True, sightings=2),
                            box_beside_the_forearm(0.12), 193,
-                           "readings must hold the 129 rays, then the 64 arm-rays rays", readings, 20)
+                           "readings must hold the 129 rays, then the 64 arm rays", readings, 20)
 
 
 def test_a_policy_with_goal_rays_reads_them_last_in_fractions_or_metres(tmp_path):
@@ -294,7 +294,7 @@ def test_the_arm_rules_arm_rays_on_a_real_arm_keep_the_forearm_off_a_box(tmp_pat
                                    base_rpy=scenario.base_rpy)
         assert controller.n_readings == 129 + 64
         controller.reset(q, reach.goals[0], scenario.workspace_low, scenario.workspace_high)
-        with pytest.raises(ValueError, match=re.escape("the 129 rays, then the 64 arm-rays rays")):
+        with pytest.raises(ValueError, match=re.escape("the 129 rays, then the 64 arm rays")):
             controller.step(q, reach._ray_fractions.copy())
         controller.step(q, np.r_[reach._ray_fractions, arm])
     finally:

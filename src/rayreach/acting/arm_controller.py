@@ -263,8 +263,7 @@ class ArmController:
             raise ValueError(f"unknown unit '{unit}'; valid: {', '.join(UNITS)}")
         r = np.array(readings, dtype=float).reshape(-1)  # a copy, as in _vector
         if r.shape != (self.n_readings,):
-            observation = self.policy.observation
-            what = f"{N_RAYS} rays" + "".join(f", then the {n} {name} rays"
+            what = f"{N_RAYS} rays" + "".join(f", then the {n} {name.removesuffix('-rays')} rays"
                                               for name, n, _ in extra_sets(self.reading_sets))
             what += f", then the {N_GOAL_RAYS} goal rays" if self.n_goal_rays else ""
             raise ValueError(f"readings must hold the {what} in the layout's order (docs/rays.md, rayreach rays), "
