@@ -25,6 +25,8 @@ def test_the_default_recipe_clones_the_box_and_shelf_experts_in_broad_worlds_onl
     assert broad.clone_kinds == ("goal_box", "shelf") and 0 < broad.clone_at < broad.timesteps
     kr16 = recipe("default", robot="kr16", suite="broad")
     assert kr16.starts == 1 and not kr16.observation.tip_back  # one start; the robot's other defaults stay
+    assert broad.obstacles.mix and broad.obstacles.world_counts(3, 4) == [1, 2, 3, 1]  # one to three elements
+    assert not recipe("default", robot="ur5").obstacles.mix
     for config in (recipe("default", robot="ur5"), recipe("paper", robot="ur5", suite="broad")):
         assert config.clone_kinds == () and config.clone_at == 0
 
