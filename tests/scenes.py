@@ -68,3 +68,23 @@ def box_beside_the_forearm(gap: float, along: float = 0.5, side: float = 1.0):
     tip = kin.fk(np.asarray(spec.home))
     return drawn_scenario("box", "ur5", np.asarray(spec.home), tip[:3, 3] + 0.3 * tip[:3, 0], [box],
                           spec.workspace_low, spec.workspace_high, "a box beside the forearm")
+
+
+def on_the_box(points: np.ndarray, box) -> np.ndarray:
+    """Which of ``points`` (n, 3) lie in or on the box obstacle ``box`` (an ``ObstacleSpec``)."""
+    import pybullet as p
+
+    rot = np.asarray(p.getMatrixFromQuaternion(p.getQuaternionFromEuler(box.rpy))).reshape(3, 3)
+    local = (points - np.asarray(box.position)) @ rot
+    return np.all(np.abs(local) <= np.asarray(box.half_extents) + 1e-6, axis=1)
+
+
+def elbow_step_towards(kin, q: np.ndarray, centre: np.ndarray) -> np.ndarray:
+    """A 0.05 rad joint step of the elbow alone that brings the forearm's wrist end nearer
+    ``centre``."""
+    toward = np.zeros(6)
+    toward[2] = 0.05
+    wrist_end = kin.frames(q)[3][:3, 3]
+    if np.linalg.norm(kin.frames(q + toward)[3][:3, 3] - centre) > np.linalg.norm(wrist_end - centre):
+        toward = -toward
+    return toward

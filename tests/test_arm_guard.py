@@ -296,7 +296,7 @@ def test_with_the_arm_rays_the_rule_keeps_the_forearm_off_a_box_no_tool_ray_sees
     with ``SafetyLayer.arm_rays`` its face enters the seen points and an elbow step that
     swings the forearm towards it is refused, one away is taken; without, the rule knows
     nothing of it. The upper arm is guarded only with the arm rays."""
-    from scenes import box_beside_the_forearm
+    from scenes import box_beside_the_forearm, elbow_step_towards, on_the_box
 
     box_face_gap = 0.06
     scenario = box_beside_the_forearm(box_face_gap, along=0.8, side=-1.0)
@@ -309,17 +309,10 @@ def test_with_the_arm_rays_the_rule_keeps_the_forearm_off_a_box_no_tool_ray_sees
         assert ("upper_arm_link" in rule.capsules.names) == arm_rays
         points = env.memory.seen_points(100)
         box = scenario.obstacles[0]
-        centre, rot = np.asarray(box.position), np.asarray(p.getMatrixFromQuaternion(
-            p.getQuaternionFromEuler(box.rpy))).reshape(3, 3)
-        local = (points - centre) @ rot
-        on_box = np.all(np.abs(local) <= np.asarray(box.half_extents) + 1e-6, axis=1)
+        on_box = on_the_box(points, box)
         assert on_box.sum() >= 2 if arm_rays else on_box.sum() == 0  # the rings that face it
         q = reach.q.copy()
-        wrist_end = reach.kin.frames(q)[3][:3, 3]  # the forearm's end at the wrist
-        toward = np.zeros(6)
-        toward[2] = 0.05  # the elbow
-        if np.linalg.norm(reach.kin.frames(q + toward)[3][:3, 3] - centre) > np.linalg.norm(wrist_end - centre):
-            toward = -toward
+        toward = elbow_step_towards(reach.kin, q, np.asarray(box.position))
         assert rule.guard.allows(q, q - toward, points)
         assert rule.guard.allows(q, q + toward, points) != arm_rays
     finally:
