@@ -158,8 +158,13 @@ def test_exported_command_keeps_the_flags_a_resume_keeps():
     fixed = {**base, "acting_layers": True, "obstacles": {"start": 1, "minimum": 1, "maximum": 1}}
     assert train_command(fixed, "RUN").endswith("--checkpoint-every 250000 --acting-layers --obstacles 1 [--resume]")
     kr16 = {"starts": 2}  # the KR16's default recipe starts two seeds; a run saved before starts had one
-    assert train_command({**base, **kr16, "recipe": "default", "suite": "broad", "decision_period": 4}, "RUN").endswith(
-        "--checkpoint-every 250000 --suite broad [--resume]")
+    broad = {**base, "starts": 1, "recipe": "default", "suite": "broad", "decision_period": 4}  # one start in broad
+    assert train_command(broad, "RUN").endswith(  # a broad run made before the recipe mixed the counts
+        "--checkpoint-every 250000 --suite broad --obstacle-curriculum [--resume]")
+    mixed = {**broad, "obstacles": {"start": 3, "minimum": 3, "maximum": 3, "mix": True}}
+    assert train_command(mixed, "RUN").endswith("--checkpoint-every 250000 --suite broad [--resume]")
+    assert train_command({**mixed, "obstacles": {**mixed["obstacles"], "mix": False}}, "RUN").endswith(
+        "--suite broad --obstacles 3 [--resume]")
     # a default run made before the decision period decided every control step
     assert train_command({**base, **kr16, "recipe": "default"}, "RUN").endswith("--decision-period 1 [--resume]")
     assert train_command({**base, "recipe": "default"}, "RUN").endswith("--decision-period 1 --starts 1 [--resume]")
@@ -458,3 +463,25 @@ def test_an_obstacle_mix_puts_the_worlds_at_one_to_n_obstacles(tmp_path, monkeyp
     assert " --obstacle-mix 3 " in train_command(meta["config"], "RUN")
     assert main(["train", "--robot", "ur5", "--obstacle-mix", "3", "--obstacles", "2", "--out", str(tmp_path / "x")]) == 2
     assert "give one" in capsys.readouterr().err
+
+
+def test_the_obstacle_curriculum_flag_undoes_the_broad_recipes_mix(tmp_path, monkeypatch, capsys):
+    """A broad run by the recipe before the mix is repeated by the command its bundle prints."""
+    from rayreach.cli import main
+    from rayreach.learning import clone_stage
+    from rayreach.learning.curriculum import ObstacleParams
+
+    got = {}
+
+    def capture(config, out, **_):
+        got["config"] = config
+        raise SystemExit(0)
+
+    monkeypatch.setattr(clone_stage, "train_with_clone", capture)
+    with pytest.raises(SystemExit):
+        main(["train", "--robot", "ur5", "--suite", "broad", "--obstacle-curriculum", "--out", str(tmp_path / "c")])
+    assert got["config"].obstacles == ObstacleParams() and got["config"].suite == "broad"
+    assert " --obstacle-curriculum " in train_command(asdict(got["config"]), "RUN")
+    assert main(["train", "--robot", "ur5", "--obstacle-curriculum", "--obstacle-mix", "2",
+                 "--out", str(tmp_path / "x")]) == 2
+    assert "--obstacle-mix and --obstacle-curriculum" in capsys.readouterr().err

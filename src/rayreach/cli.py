@@ -211,6 +211,9 @@ def build_parser() -> argparse.ArgumentParser:
     train.add_argument("--obstacle-mix", type=int, default=None, metavar="N",
                        help="spread the worlds evenly over 1 to N obstacles, for the whole run (no obstacle "
                             "curriculum; also changes a resumed run)")
+    train.add_argument("--obstacle-curriculum", action="store_true",
+                       help="raise the obstacle count from 1 as training succeeds, where the suite's recipe "
+                            "fixes or mixes it (the broad recipe mixes 1 to 3; also changes a resumed run)")
     train.add_argument("--tip-back", action=argparse.BooleanOptionalAction, default=None,
                        help="read the 24 tip-back rays (default: the recipe's for the robot; a resumed run keeps "
                             "its own observation)")
@@ -702,8 +705,13 @@ def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
         overrides["extra_kinds"] = _names(args.extra_kinds)
     if args.cover_speed is not None:
         overrides["cover_speed"] = _speed_range(args.cover_speed)
-    if args.obstacles is not None and args.obstacle_mix is not None:
-        raise ValueError("--obstacles puts every world at one count and --obstacle-mix spreads them: give one")
+    given = [flag for flag, value in (("--obstacles", args.obstacles), ("--obstacle-mix", args.obstacle_mix),
+                                      ("--obstacle-curriculum", args.obstacle_curriculum or None)) if value is not None]
+    if len(given) > 1:
+        raise ValueError(f"{' and '.join(given)} each set the obstacle counts (one count, 1 to N mixed, "
+                         "the curriculum): give one")
+    if args.obstacle_curriculum:
+        overrides["obstacles"] = ObstacleParams()
     if args.obstacles is not None:
         overrides["obstacles"] = ObstacleParams(start=args.obstacles, minimum=args.obstacles, maximum=args.obstacles)
     if args.obstacle_mix is not None:

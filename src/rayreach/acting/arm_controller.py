@@ -114,7 +114,7 @@ class ArmController:
         self.extra_rays = RayModel.extra(self.spec, ray_range, observation.ray_sets)
         self.ray_range, self.goal_tolerance, self.ik = float(ray_range), float(goal_tolerance), ik
         self.acting = acting
-        guard_arm = acting.safety.arm_rays and acting.safety.arm_clearance > 0
+        guard_arm = acting.safety.reads_arm_rays
         self.arm_rays = RayModel(self.spec, ray_range, arm_layout(self.spec)) if guard_arm else None
         """The rays round the upper arm and the forearm that the arm's rule reads
         (``SafetyLayer.arm_rays``): the policy's own where it observes them, else 64 readings more."""

@@ -53,7 +53,7 @@ class ActingEnv(gym.Wrapper):
         spec = reach.spec_robot
         guard = config.safety.arm_clearance > 0
         self._arm_rays = (RayModel(spec, reach.config.ray_range, arm_layout(spec))
-                          if guard and config.safety.arm_rays else None)
+                          if config.safety.reads_arm_rays else None)
         """The rays round the upper arm and the forearm that the arm's rule reads (``SafetyLayer.arm_rays``)."""
         capsules = ArmCapsules(reach.scene, guarded_links(spec, self._arm_rays is not None)) if guard else None
         self.components, self.final_approach, self.radii = acting_components(

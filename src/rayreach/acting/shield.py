@@ -70,6 +70,11 @@ class SafetyLayer:
     ``arm_clearance``. The tool and the arm links are each held to their own: a plate's
     edge lies a centimetre or two beyond the last point the rays hit on its face."""
 
+    @property
+    def reads_arm_rays(self) -> bool:
+        """Whether the arm's rule is on and reads the rays round the upper arm and the forearm."""
+        return self.arm_rays and self.arm_clearance > 0
+
     def __post_init__(self) -> None:
         for name in ("workspace_guard", "ray_shield", "slide", "memory_steps", "arm_clearance", "arm_memory_steps"):
             if not getattr(self, name) >= 0:

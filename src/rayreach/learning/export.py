@@ -4,8 +4,12 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from rayreach.learning.bundles import CheckpointError, _json_default, read_bundle_meta
+
+if TYPE_CHECKING:
+    from rayreach.learning.train import TrainConfig
 
 
 def train_command(config: dict, out: str | Path) -> str:
@@ -26,7 +30,8 @@ def train_command(config: dict, out: str | Path) -> str:
     from rayreach.learning.train import RECIPES, recipe
     from rayreach.sim.sensors import EXTRA_RAYS
 
-    usual = recipe(name, robot=config["robot"]) if name in RECIPES else None
+    suite = config.get("suite", "random")
+    usual = recipe(name, robot=config["robot"], suite=suite) if name in RECIPES else None
     if isinstance(observation, dict) and usual is not None:
         for field, (flag, _, _) in EXTRA_RAYS.items():
             if observation.get(field, False) != getattr(usual.observation, field):
@@ -52,10 +57,24 @@ def train_command(config: dict, out: str | Path) -> str:
     length = config.get("start_decisions")
     if usual is not None and config.get("starts", 1) > 1 and length not in (None, usual.start_decisions):
         command += f" --start-decisions {length}"
-    obstacles = config.get("obstacles", {})
-    if obstacles and obstacles["minimum"] == obstacles["maximum"] == obstacles["start"]:
-        command += f" --{'obstacle-mix' if obstacles.get('mix') else 'obstacles'} {obstacles['start']}"
-    return command + " [--resume]"
+    return command + _obstacle_flag(config.get("obstacles", {}), usual) + " [--resume]"
+
+
+def _obstacle_flag(obstacles: dict, usual: TrainConfig | None) -> str:
+    """The flag that sets a run's obstacles where they are not its recipe's: a fixed count, an
+    even mix, or the curriculum (the broad recipe's default is the mix; runs before it climbed)."""
+    if not obstacles:
+        return ""
+    fixed = obstacles["minimum"] == obstacles["maximum"] == obstacles["start"]
+    mix = obstacles.get("mix", False)
+    if usual is not None:
+        theirs = usual.obstacles
+        if (fixed, mix) == (theirs.minimum == theirs.maximum == theirs.start, theirs.mix) and (
+                not fixed or obstacles["start"] == theirs.start):
+            return ""
+    if fixed:
+        return f" --{'obstacle-mix' if mix else 'obstacles'} {obstacles['start']}"
+    return " --obstacle-curriculum" if usual is not None else ""
 
 
 def run_bundle(source: str | Path) -> Path:
