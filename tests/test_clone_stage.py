@@ -87,6 +87,30 @@ def test_a_run_clones_each_expert_at_its_decision_and_resumes_after_a_stop_in_th
     assert config_from_meta(meta).clone_kinds == ("goal_box", "shelf")
 
 
+def test_a_clone_stopped_after_its_checkpoint_is_not_made_again(tmp_path, monkeypatch):
+    """The cloned actor and its report are saved in one write: a stop before the report's own
+    file loses neither, and the resumed run writes the file and trains on without a second clone."""
+    from rayreach.learning import demonstrations
+
+    out = tmp_path / "run"
+
+    def stop(run, report):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(demonstrations, "write_report", stop)
+    config = tiny_broad(clone_kinds=("goal_box",), timesteps=384)
+    with pytest.raises(KeyboardInterrupt):
+        clone_stage.train_with_clone(config, out, clone=TINY_CLONE, progress=False)
+    assert not (out / "clone-goal_box.json").exists()
+    held = read_bundle_meta(out / CHECKPOINT)[0]["state"]["clones"]["goal_box"]
+    assert held["kind"] == "goal_box" and held["timesteps"] == 256
+    monkeypatch.undo()
+    monkeypatch.setattr(clone_stage, "clone_into_checkpoint", lambda *a: pytest.fail("cloned a second time"))
+    model = clone_stage.train_with_clone(config, out, resume=True, clone=TINY_CLONE, progress=False)
+    assert json.loads((out / "clone-goal_box.json").read_text()) == held
+    assert read_bundle_meta(model)[0]["timesteps"] == 384
+
+
 def test_part_settings_wait_for_the_clone_and_a_run_that_ends_before_it_does_not_clone(tmp_path, monkeypatch):
     with pytest.raises(ValueError, match="critic_warmup apply to one part of a run.*goal_box, shelf"):
         clone_stage.train_with_clone(tiny_broad(), tmp_path / "a", critic_warmup=10)

@@ -8,10 +8,11 @@ their experts cloned at 6.4 M decisions the UR5 alone reached the goal in 75 of 
 Done by hand that took three commands; here ``rayreach train`` runs them.
 
 An interrupted run resumes with ``--resume``: before the clone as any run, then each kind
-whose report (``clone-KIND.json``) is not yet in the run directory is cloned, and the rest
-trains. The first ``CLONE_CRITIC_WARMUP`` decisions after the clone fit the critic alone, as
-the measured runs did: its values were learned for the actor before the clone. A clone
-stopped after its checkpoint was saved but before its report is made again on resume.
+not yet cloned is cloned, and the rest trains. A kind is cloned once its checkpoint holds the
+report (saved with the cloned actor in one write) or its ``clone-KIND.json`` is in the run
+directory (runs saved before the checkpoint held them). The first ``CLONE_CRITIC_WARMUP``
+decisions after the clone fit the critic alone, as the measured runs did: its values were
+learned for the actor before the clone.
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from rayreach.learning.bundles import CheckpointError, read_bundle_meta
-from rayreach.learning.demonstrations import CloneConfig, clone_into_checkpoint, report_name
+from rayreach.learning.demonstrations import CLONES, CloneConfig, clone_into_checkpoint, report_name, write_report
 from rayreach.learning.imitation import demos_name, load_demos
 from rayreach.learning.starts import train_with_starts
 from rayreach.learning.train import CHECKPOINT, TrainConfig, config_from_meta, train
@@ -50,6 +51,16 @@ def checkpoint_steps(out: Path) -> int | None:
     return int(read_bundle_meta(path)[0]["timesteps"]) if path.exists() else None
 
 
+def cloned_kinds(out: Path, kinds: tuple[str, ...]) -> set[str]:
+    """Those of ``kinds`` cloned into the run's checkpoint. A report the checkpoint holds but the
+    directory lacks (a stop between the two writes) is written out again."""
+    held = read_bundle_meta(out / CHECKPOINT)[0]["state"].get(CLONES, {}) if (out / CHECKPOINT).exists() else {}
+    for kind in set(kinds) & set(held):
+        if not (out / report_name(kind)).exists():
+            write_report(out, held[kind])
+    return {kind for kind in kinds if (out / report_name(kind)).exists()}
+
+
 def warmup_left(steps: int, cloned_at: int) -> int:
     """Decisions of the critic's warm-up still to come at ``steps`` (a run stopped inside it
     finishes it when resumed)."""
@@ -75,7 +86,8 @@ def train_with_clone(config: TrainConfig, out: str | Path, resume: bool = False,
     if not config.clone_kinds or config.timesteps <= config.clone_at:
         return train_with_starts(config, out, resume=resume, command=command, resume_overrides=resume_overrides,
                                  critic_warmup=critic_warmup, **train_kwargs)
-    pending = [k for k in config.clone_kinds if not (out / report_name(k)).exists()]
+    done = cloned_kinds(out, config.clone_kinds) if resume else set()
+    pending = [k for k in config.clone_kinds if k not in done]
     if pending and (critic_warmup or any(train_kwargs.values())):
         given = ["critic_warmup"] * bool(critic_warmup) + [k for k, v in train_kwargs.items() if v]
         raise ValueError(f"{', '.join(given)} apply to one part of a run: give them to a --resume after its "

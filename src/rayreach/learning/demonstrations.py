@@ -34,6 +34,10 @@ from rayreach.scenarios.suites import suite_kinds
 from rayreach.sim.transforms import rpy_to_matrix
 
 
+CLONES = "clones"
+"""The key in a checkpoint's ``meta["state"]`` that holds the report of each clone in its actor."""
+
+
 def report_name(kind: str) -> str:
     """The report ``clone_into_checkpoint`` writes into the run directory."""
     return f"clone-{kind}.json"
@@ -407,8 +411,6 @@ def clone_into_checkpoint(run: str | Path, kind: str, config: CloneConfig = Clon
     elapsed = time.perf_counter() - started
     meta["state"]["wall_time"] = float(meta["state"]["wall_time"]) + elapsed
     meta["wall_time_s"] = round(meta["state"]["wall_time"], 1)
-    save_bundle(model, checkpoint, meta, norm)
-    save_demos(run, kind, expert_obs, expert_labels)  # for an imitation term beside PPO (``imitation``)
     report = {
         "timesteps": int(meta["timesteps"]),
         "wall_time_s": round(elapsed, 1),
@@ -420,8 +422,18 @@ def clone_into_checkpoint(run: str | Path, kind: str, config: CloneConfig = Clon
                          "goal_tolerance": anchor_tolerance},
         "rounds": rounds,
     }
-    (run / report_name(kind)).write_text(json.dumps(report, indent=2) + "\n")
+    save_demos(run, kind, expert_obs, expert_labels)  # for an imitation term beside PPO (``imitation``)
+    meta["state"].setdefault(CLONES, {})[kind] = report  # saved with the cloned actor: a stop after it loses nothing
+    save_bundle(model, checkpoint, meta, norm)
+    write_report(run, report)
     return report
+
+
+def write_report(run: Path, report: dict[str, Any]) -> Path:
+    """The clone's report as ``run/clone-KIND.json``."""
+    path = Path(run) / report_name(report["kind"])
+    path.write_text(json.dumps(report, indent=2) + "\n")
+    return path
 
 
 def _fit(policy, optimiser, x, y, epochs: int, batch_size: int) -> float:
