@@ -410,6 +410,30 @@ def test_train_command_line_sets_the_rays_beyond_the_recipes(tmp_path):
     assert observation == replace(recipe("default", robot="kr16").observation, slanted=True, tip_back=True)
 
 
+def test_a_resumed_part_discounts_its_returns_by_a_new_gamma(tmp_path):
+    """SB3 keeps a loaded model's discount; a part resumed with another computes its returns,
+    advantages and reward normalisation with the new one, and the run's command names it."""
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    from rayreach.learning.train import train
+
+    seen = []
+
+    class Discounts(BaseCallback):
+        def _on_rollout_end(self) -> None:
+            seen.append((self.model.gamma, self.model.rollout_buffer.gamma, self.model.get_vec_normalize_env().gamma))
+
+        def _on_step(self) -> bool:
+            return True
+
+    out = tmp_path / "run"
+    train(_small_default(timesteps=256), out, callbacks=[Discounts()])
+    train(_small_default(timesteps=512), out, resume=True, resume_overrides={"gamma": 0.995}, callbacks=[Discounts()])
+    assert seen[0] == (0.99, 0.99, 0.99) and seen[-1] == (0.995, 0.995, 0.995)
+    meta, _ = read_bundle_meta(out / "model.zip")
+    assert meta["config"]["gamma"] == 0.995 and " --gamma 0.995 " in train_command(meta["config"], "RUN")
+
+
 def test_extra_kinds_are_drawn_beside_the_robots_and_survive_a_resume():
     from rayreach.learning.train import env_config
     from rayreach.robots import UR5

@@ -240,6 +240,9 @@ def build_parser() -> argparse.ArgumentParser:
     train.add_argument("--learning-rate", type=float, default=None,
                        help="Adam step size (default: the recipe's, 1e-3 adapted to the updates' KL, or baseline's "
                             "3e-4, the paper's; also changes a resumed run and restarts its adaptation)")
+    train.add_argument("--gamma", type=float, default=None,
+                       help="discount per decision, in (0, 1) (default: the recipe's 0.99; also changes a "
+                            "resumed run)")
     train.add_argument("--freeze-features", action="store_true",
                        help="hold the shared feature extractor fixed for this part (fine-tuning after clone)")
     train.add_argument("--goal-size", type=float, default=None, help="fix the goal size, m (no goal curriculum)")
@@ -725,6 +728,10 @@ def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
         overrides["true_goal_share"] = args.true_goal_share
     if args.acting_layers:
         overrides["acting_layers"] = True
+    if args.gamma is not None:
+        if not 0 < args.gamma < 1:
+            raise ValueError(f"--gamma must lie in (0, 1), got {args.gamma}")
+        overrides["gamma"] = args.gamma
     if args.learning_rate is not None:
         if not args.learning_rate > 0:
             raise ValueError(f"--learning-rate must be > 0, got {args.learning_rate}")

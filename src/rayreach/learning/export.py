@@ -43,6 +43,8 @@ def train_command(config: dict, out: str | Path) -> str:
     period = config.get("decision_period", 1)  # a run saved before the choice decided every step
     if usual is not None and period != usual.decision_period:
         command += f" --decision-period {period}"
+    if usual is not None and config.get("gamma", usual.gamma) != usual.gamma:
+        command += f" --gamma {config['gamma']:g}"
     if config.get("extra_kinds"):
         command += f" --extra-kinds {','.join(config['extra_kinds'])}"
     if config.get("cover_speed"):

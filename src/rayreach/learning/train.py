@@ -567,6 +567,13 @@ def adapted_learning_rate(lr: float, kl: float, desired_kl: float) -> float:
     return min(max(lr, low), high)
 
 
+def set_discount(model, gamma: float) -> None:
+    """The discount of the next rollouts' returns and advantages (SB3 keeps the saved one);
+    the reward normalisation's, ``build_vec_env``, follows the config already."""
+    model.gamma = gamma
+    model.rollout_buffer.gamma = gamma
+
+
 def set_learning_rate(model, lr: float) -> None:
     """A constant step size from the next update on (SB3 would keep the saved schedule)."""
     model.learning_rate = lr
@@ -861,6 +868,7 @@ def _train(config: TrainConfig, out: Path, resume: bool, command: str, resume_ov
         if resume:
             model = PPO.load(str(checkpoint), env=venv, device=config.device, tensorboard_log=tensorboard_dir)
             set_learning_rate(model, config.learning_rate)
+            set_discount(model, config.gamma)
             if norm is not None:
                 restore_normalization(venv, norm)
         else:
