@@ -242,6 +242,7 @@ def test_the_broad_workspace_holds_the_reach_and_the_training_box(robot):
         ({"margin": -0.01}, "margin"),
         ({"start_clearance": -0.01}, "start_clearance"),
         ({"max_tries": 0}, "max_tries"),
+        ({"element_sets": 0}, "element_sets"),
     ],
 )
 def test_bad_config_values_are_refused(kwargs, message):
@@ -260,6 +261,22 @@ def test_the_number_of_elements_follows_n_obstacles(drawn):
         worlds.sample(np.random.default_rng(0), 2)
     with pytest.raises(ValueError, match="n_obstacles"):
         worlds.sample(np.random.default_rng(0), -1)
+
+
+def test_elements_that_do_not_fit_are_drawn_anew_and_a_world_that_never_fits_names_them(drawn, monkeypatch):
+    """A set of elements that fits in none of its tries gives way to another set (a run must
+    not stop on one unlucky draw); only when every set fails does ``sample`` raise."""
+    d = drawn["ur5"]
+    worlds = BroadWorlds(d.kin, d.checker, BroadWorldConfig(n_obstacles=1, kinds=("shelf", "table"), max_tries=20))
+    real = worlds._goal_scene
+    tried = []
+    monkeypatch.setattr(worlds, "_goal_scene", lambda kind, rng: tried.append(kind) or (
+        None if kind == "shelf" else real(kind, rng)))
+    kinds = [broad_kinds(worlds.sample(np.random.default_rng(seed))[0]) for seed in range(6)]
+    assert kinds == [["table"]] * 6 and "shelf" in tried
+    monkeypatch.setattr(worlds, "_goal_scene", lambda kind, rng: None)
+    with pytest.raises(RuntimeError, match=r"20 tries for each of 5 sets of elements: \[\['(shelf|table)'\]"):
+        worlds.sample(np.random.default_rng(0))
 
 
 def test_the_start_keeps_its_clearance_when_asked(drawn):

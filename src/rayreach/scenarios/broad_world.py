@@ -174,7 +174,10 @@ class BroadWorldConfig:
     """Least distance, m, between the robot at its start and every obstacle; 0: the start need
     only be free of collision (see ``RandomWorldConfig.start_clearance``)."""
     max_tries: int = 200
-    """Draws before ``sample`` gives up."""
+    """Draws of a world for one set of elements before ``sample`` draws the elements anew."""
+    element_sets: int = 5
+    """Sets of elements ``sample`` draws before it gives up. Some sets rarely fit (a shelf
+    between two walls): a training run drew one of them after 23 M decisions and stopped."""
     start_tries: int = 3
     """Start poses tried per drawn goal scene: the scene is the costly part of a draw."""
     element_tries: int = 4
@@ -201,7 +204,7 @@ class BroadWorldConfig:
             value = getattr(self, name)
             if not value >= 0:
                 raise ValueError(f"{name} must be >= 0, got {value}")
-        for name in ("max_tries", "start_tries", "element_tries"):
+        for name in ("max_tries", "element_sets", "start_tries", "element_tries"):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
 
@@ -275,10 +278,24 @@ class BroadWorlds:
             raise ValueError(f"n_obstacles must be >= 0, got {n}")
         if n > 1 and not self.extra_kinds:
             raise ValueError(f"n_obstacles {n} needs one of {', '.join(EXTRA_KINDS)} among the kinds")
+        drawn_sets = []
+        for _ in range(self.config.element_sets):
+            # drawn once per max_tries, not per try: a kind that is harder to place is then not drawn less often
+            kinds = [str(rng.choice(self.goal_kinds))] if n else []
+            kinds += [str(k) for k in rng.choice(self.extra_kinds, size=n - 1)] if n > 1 else []
+            found = self._sample_with(rng, kinds)
+            if found is not None:
+                return found
+            drawn_sets.append(kinds)
+        raise RuntimeError(
+            f"no feasible broad world for {self.kin.spec.name} in {self.config.max_tries} tries for each of "
+            f"{len(drawn_sets)} sets of elements: {drawn_sets}"
+        )
+
+    def _sample_with(self, rng: np.random.Generator, kinds: list[str]) -> tuple[Scenario, np.ndarray] | None:
+        """A feasible scenario of these elements and its start configuration; None after
+        ``max_tries`` draws."""
         spec = self.kin.spec
-        # drawn once, not per try: a kind that is harder to place is then not drawn less often
-        kinds = [str(rng.choice(self.goal_kinds))] if n else []
-        kinds += [str(k) for k in rng.choice(self.extra_kinds, size=n - 1)] if n > 1 else []
         for _ in range(self.config.max_tries):
             drawn = self._goal_scene(kinds[0], rng) if kinds else self._no_scene(rng)
             if drawn is None:
@@ -293,9 +310,7 @@ class BroadWorlds:
                     scenario = drawn_scenario("broad", spec.name, q_start, goal, obstacles, *self.workspace,
                                               f"broad world: {', '.join(kinds) or 'no obstacles'}")
                     return scenario, q_start
-        raise RuntimeError(
-            f"no feasible broad world for {spec.name} with elements {kinds} in {self.config.max_tries} tries"
-        )
+        return None
 
     def _complete(
         self, rng: np.random.Generator, kinds: list[str], scene_obstacles: list[ObstacleSpec],
