@@ -67,16 +67,23 @@ def _obstacle_flag(obstacles: dict, usual: TrainConfig | None) -> str:
     even mix, or the curriculum (the broad recipe's default is the mix; runs before it climbed)."""
     if not obstacles:
         return ""
-    fixed = obstacles["minimum"] == obstacles["maximum"] == obstacles["start"]
-    mix = obstacles.get("mix", False)
+    saved = _obstacle_rule(obstacles["start"], obstacles["minimum"], obstacles["maximum"], obstacles.get("mix", False))
     if usual is not None:
         theirs = usual.obstacles
-        if (fixed, mix) == (theirs.minimum == theirs.maximum == theirs.start, theirs.mix) and (
-                not fixed or obstacles["start"] == theirs.start):
+        if saved == _obstacle_rule(theirs.start, theirs.minimum, theirs.maximum, theirs.mix):
             return ""
-    if fixed:
-        return f" --{'obstacle-mix' if mix else 'obstacles'} {obstacles['start']}"
+    name, count = saved
+    if name != "curriculum":
+        return f" --{name} {count}"
     return " --obstacle-curriculum" if usual is not None else ""
+
+
+def _obstacle_rule(start: int, minimum: int, maximum: int, mix: bool) -> tuple[str, int | bool]:
+    """How a run sets its worlds' obstacle counts: the flag of a fixed count or an even mix
+    with that count, else the curriculum (with whether it mixes)."""
+    if minimum == maximum == start:
+        return ("obstacle-mix" if mix else "obstacles"), start
+    return "curriculum", mix
 
 
 def run_bundle(source: str | Path) -> Path:
