@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import dataclasses
 import subprocess
 import sys
 
 import pytest
 
 from rayreach.acting import LAYERS, ActingConfig
+from rayreach.acting.shield import ACTING_SAFETY, SLIDE
 from rayreach.cli import acting_from_args, build_parser
 from rayreach.planners import DRL_PLANNERS, drl_acting
 
@@ -31,12 +33,18 @@ print(sorted(m for m in sys.modules if m.startswith("rayreach.acting")))
     assert done.stdout.strip().splitlines()[-1] == "[]"
 
 
+SHIPPED = tuple(name for name in LAYERS if name != "slide")
+"""The shipped stack: every layer but the slide, which earned its place with neither policy."""
+
+
 def test_each_layer_switches_off_by_name_and_only_that_layer():
-    stack = ActingConfig()
-    assert stack.layers == LAYERS  # the shipped stack has every layer on
+    assert ActingConfig().layers == SHIPPED
+    sliding = dataclasses.replace(ActingConfig(), safety=dataclasses.replace(ACTING_SAFETY, slide=SLIDE))
+    assert sliding.layers == LAYERS  # the slide, asked for, is a layer like the others
     for layer in LAYERS:
-        assert ActingConfig().without(layer).layers == tuple(name for name in LAYERS if name != layer)
-    assert ActingConfig.off().layers == ()
+        assert sliding.without(layer).layers == tuple(name for name in LAYERS if name != layer)
+        assert ActingConfig().without(layer).layers == tuple(name for name in SHIPPED if name != layer)
+    assert ActingConfig.off().layers == () and sliding.without(*LAYERS).layers == ()
     assert ActingConfig.training().layers == ("ray_shield", "workspace_guard", "arm_guard")
     with pytest.raises(ValueError, match=r"unknown acting layer\(s\) \['shield'\]; known: final_approach, ray_shield"):
         ActingConfig().without("shield")
@@ -45,7 +53,8 @@ def test_each_layer_switches_off_by_name_and_only_that_layer():
 def test_the_rollout_command_has_one_switch_per_layer():
     parser = build_parser()
     base = ["rollout", "--model", "m.zip", "exp1"]
-    assert acting_from_args(parser.parse_args(base)).layers == LAYERS
+    assert acting_from_args(parser.parse_args(base)).layers == SHIPPED
+    assert acting_from_args(parser.parse_args([*base, "--slide", str(SLIDE)])).layers == LAYERS
     for layer in LAYERS:
         flag = f"--no-{layer.replace('_', '-')}"
         assert acting_from_args(parser.parse_args([*base, flag])) == ActingConfig().without(layer)
@@ -56,8 +65,9 @@ def test_the_rollout_command_has_one_switch_per_layer():
 
 def test_drl_planner_names_are_the_stack_the_policy_alone_and_the_stack_minus_one_layer():
     assert drl_acting("drl") == ActingConfig() and drl_acting("drl-alone") == ActingConfig.off()
-    for layer in LAYERS:
+    for layer in SHIPPED:
         assert f"drl-no-{layer}" in DRL_PLANNERS and drl_acting(f"drl-no-{layer}") == ActingConfig().without(layer)
+    assert "drl-no-slide" not in DRL_PLANNERS  # the same stack as drl: the slide is off in it
     with pytest.raises(ValueError, match="unknown DRL planner 'drl-no-wings'; valid: drl, drl-alone"):
         drl_acting("drl-no-wings")
 

@@ -31,7 +31,7 @@ def test_controller_commands_what_the_acting_env_does(robot, scenario):
     capsules here and meshes there)."""
     config = ActingConfig().without("arm_guard")
     policy = load_policy(shipped_model(robot))
-    env = ActingEnv(ReachEnv(robot=robot, scenario=scenario), config)
+    env = ActingEnv(ReachEnv(robot=robot, scenario=scenario, observation=policy.observation), config)
     try:
         actor = ActingPolicy(policy, resample=config.resample)
         actor.reset(0)

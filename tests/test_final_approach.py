@@ -14,7 +14,7 @@ from exp1_scenes import acting_around_the_tool, exp1_around_the_tool, layers
 from rayreach.acting import SOURCES, ActingConfig, ActingEnv
 from rayreach.acting.config import ROBOT_RADII
 from rayreach.acting.final_approach import FinalApproach
-from rayreach.acting.shield import ACTING_SAFETY
+from rayreach.acting.shield import ACTING_SAFETY, SLIDE
 from rayreach.env.reach import N_ROBOT_OBS, ReachEnv
 from rayreach.learning.train import TrainConfig, make_env_fn, set_trainable
 from rayreach.robots import get_robot
@@ -225,7 +225,7 @@ def test_the_final_approach_takes_over_only_while_it_is_on():
 
 
 @pytest.mark.parametrize("give_way", [False, True])
-def test_a_final_approach_the_arms_rule_holds_gives_way_to_the_policy_only_when_asked(give_way, monkeypatch):
+def test_a_final_approach_the_arms_rule_holds_gives_way_to_the_policy_unless_told_not_to(give_way, monkeypatch):
     """The arm's rule stands in for a wrist beside a shelf's board: it refuses every straight
     step. Without ``give_way`` the final approach asks again and again and the arm stays
     held; with it, after the first held step the policy's own steps (+x, at the goal) go
@@ -470,10 +470,11 @@ def _box_behind(ee):  # its +x face 9 cm to the -x of the tool point
     ([_box_behind], (0.0, 0.15, 0.0), (-1.0, 0.0, 0.0), "slide"),  # a push held at a box, the goal aside
 ])
 def test_training_layers_never_replace_the_policys_action(scene, goal_offset, push, replaced_by):
-    """Where the shipped stack's final approach takes over and where its slide does,
-    ``ActingConfig.training()`` leaves every step the policy's, or held."""
+    """Where the shipped stack's final approach takes over and where the slide (an option)
+    does, ``ActingConfig.training()`` leaves every step the policy's, or held."""
     action = np.r_[push, 0.0, 0.0, 0.0].astype(np.float32)
-    for config, kept in ((ActingConfig().without("resample"), False), (ActingConfig.training(), True)):
+    stack = dataclasses.replace(ActingConfig(), safety=dataclasses.replace(ACTING_SAFETY, slide=SLIDE))
+    for config, kept in ((stack.without("resample"), False), (ActingConfig.training(), True)):
         env = acting_around_the_tool(scene, config, np.array(goal_offset))
         try:
             env.reset(seed=0)

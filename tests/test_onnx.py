@@ -80,7 +80,7 @@ def cases(tmp_path_factory):
     envs = [ReachEnv(robot="ur5"), ReachEnv(robot="ur5", scenario="exp1")]
     made["ur5"] = (ur5, OnnxPolicy(export_onnx(ur5, folder / "ur5.onnx")), _observations(ur5, envs, 1000))
     kr16 = load_policy(MODELS_DIR / "kr16.zip")
-    envs += [ReachEnv(robot="kr16"), ReachEnv(scenario="exp4")]
+    envs += [ReachEnv(robot="kr16", observation=kr16.observation), ReachEnv(scenario="exp4", observation=kr16.observation)]
     made["kr16"] = (kr16, OnnxPolicy(export_onnx(MODELS_DIR / "kr16.zip", folder / "kr16.onnx")),
                     _observations(kr16, envs[2:], 300, seed=100))
     planner = load_policy(_planner_bundle(folder / "planner.zip"))

@@ -11,7 +11,7 @@ import pytest
 from exp1_scenes import acting_around_the_tool, layers
 from rayreach.acting import ActingConfig, ActingEnv
 from rayreach.acting.memory import RayMemory
-from rayreach.acting.shield import (ACTING_SAFETY, LOST, MARGIN, SafetyLayer, nearest_direction_in_cone,
+from rayreach.acting.shield import (ACTING_SAFETY, LOST, MARGIN, SLIDE, SafetyLayer, nearest_direction_in_cone,
                                     nearest_in_cone, remembered_rays)
 from rayreach.env.perception import Perception
 from rayreach.env.reach import ReachEnv
@@ -22,6 +22,8 @@ FAR = np.full(3, 0.4)
 X, Y, Z = np.eye(3)
 LOW, HIGH = np.array([-0.4, 0.3, 0.2]), np.array([0.4, 0.7, 0.5])
 INSIDE = np.array([0.0, 0.5, 0.35])
+
+SLIDING = dataclasses.replace(ACTING_SAFETY, slide=SLIDE)  # the shipped stack with the slide, an option
 
 
 def test_shield_drops_only_the_motion_towards_what_a_near_ray_sees():
@@ -329,7 +331,7 @@ def test_slide_carries_the_held_tool_along_the_box_to_a_goal_beside_it():
     steps, info = _push_into_a_box(SafetyLayer(workspace_guard=0.01, ray_shield=0.05), goal_offset=beside)
     assert steps == 60 and not info["collision"] and info["distance"] > 0.09
     assert {a["source"] for a in info["steps_acting"]} <= {"policy", "held"}
-    steps, info = _push_into_a_box(ACTING_SAFETY, goal_offset=beside)
+    steps, info = _push_into_a_box(SLIDING, goal_offset=beside)
     assert steps == 60 and not info["collision"] and info["distance"] < 0.02
     assert "slide" in {a["source"] for a in info["steps_acting"]}
 
@@ -341,7 +343,7 @@ def test_a_held_goal_step_moves_the_tool_along_the_box_and_never_into_it():
     goal's side position: the rule keeps no memory of which way it went."""
     still = _positions_pushing_into_a_box(SafetyLayer(workspace_guard=0.01, ray_shield=0.05))
     assert np.ptp(still[-20:], axis=0).max() < 1e-3
-    moving = _positions_pushing_into_a_box(ACTING_SAFETY)
+    moving = _positions_pushing_into_a_box(SLIDING)
     steps = np.linalg.norm(np.diff(moving[-20:], axis=0), axis=1)
     assert np.all(steps > 0.004)
 
@@ -350,7 +352,7 @@ def test_slide_steps_along_the_allowed_direction_nearest_the_goal_when_the_goal_
     """Under the ceiling, with a fan of near rays ahead and below and the goal beyond them
     (the traced UR5 timeouts): the goal's step projects to nothing, so the slide takes a
     step as long along the allowed direction at the smallest angle to it."""
-    layer = SafetyLayer(workspace_guard=0.01, ray_shield=0.05, slide=0.1)
+    layer = SafetyLayer(workspace_guard=0.01, ray_shield=0.05, slide=SLIDE)
     fan = np.array([[0.3, 0.0, -0.95], [0.3, 0.3, -0.9], [0.3, -0.3, -0.9], [0.7, 0.1, -0.7]])
     fan /= np.linalg.norm(fan, axis=1, keepdims=True)
     at_ceiling, distances = np.array([0.0, 0.5, 0.4901]), np.full(4, 0.03)
@@ -469,7 +471,8 @@ def test_a_plate_in_front_of_the_tool_holds_the_push_and_the_slide_takes_over():
     assert 1 <= first < 8 and np.all(moved[:first] > 0.004) and np.all(moved[first:] < 1e-6)
     assert all(a["source"] in ("policy", "held") and a["proposed"] == "policy" for a in acting)
     assert all(a["held_by"] == "shield" for a in acting if a["held"])  # the push cut to nothing
-    steps, info = _push_into_a_box(ActingConfig().without("final_approach", "detour", "arm_guard", "resample"))
+    sliding = dataclasses.replace(ActingConfig(), safety=SLIDING)
+    steps, info = _push_into_a_box(sliding.without("final_approach", "detour", "arm_guard", "resample"))
     acting = info["steps_acting"]
     assert steps == 60 and not info["collision"]
     slid = [a for a in acting if a["source"] == "slide"]

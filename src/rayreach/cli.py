@@ -307,9 +307,9 @@ def build_parser() -> argparse.ArgumentParser:
     roll.add_argument("--guard-arm-rays", action="store_true",
                       help="the arm's rule also reads rays round the upper arm and the forearm and keeps those "
                            "links clear (SafetyLayer.arm_rays)")
-    roll.add_argument("--give-way", action="store_true",
-                      help="the final approach leaves the goal to the policy once a veto held one of its steps "
-                           "(FinalApproach.give_way)")
+    roll.add_argument("--no-give-way", action="store_true",
+                      help="the final approach keeps the goal after a veto held one of its steps, instead of "
+                           "leaving it to the policy (FinalApproach.give_way)")
     roll.add_argument("--stall-steps", type=int, default=FinalApproach.stall_steps,
                       help="step towards the goal once this many steps brought it less than 1 cm nearer "
                            "(default 0: off)")
@@ -320,7 +320,8 @@ def build_parser() -> argparse.ArgumentParser:
     roll.add_argument("--ray-shield", type=float, default=ACTING_SAFETY.ray_shield,
                       help="no motion towards what a ray sees nearer than this, m")
     roll.add_argument("--slide", type=float, default=ACTING_SAFETY.slide,
-                      help="step towards the goal when the shield leaves less than this share of the policy's step")
+                      help="step towards the goal when the shield leaves less than this share of the policy's step "
+                           "(default 0: off; 0.1 is the slide as it was measured)")
     roll.add_argument("--memory-steps", type=int, default=ACTING_SAFETY.memory_steps,
                       help="the shield also holds off what the rays saw near in this many last steps")
     roll.add_argument("--arm-clearance", type=float, default=ACTING_SAFETY.arm_clearance,
@@ -821,7 +822,7 @@ def acting_from_args(args: argparse.Namespace):
                          guard_tool=not args.no_guard_tool, tool_clearance=args.tool_clearance,
                          arm_rays=args.guard_arm_rays)
     config = ActingConfig(final_approach=FinalApproach(args.final_approach_radius, stall_steps=args.stall_steps,
-                                                       turn=not args.no_turn, give_way=args.give_way),
+                                                       turn=not args.no_turn, give_way=not args.no_give_way),
                           safety=safety, detour=Detour(stall_steps=args.detour_steps))
     off = LAYERS if args.policy_alone else [layer for layer in LAYERS if getattr(args, f"no_{layer}")]
     return config.without(*off)

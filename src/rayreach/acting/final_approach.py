@@ -79,12 +79,12 @@ class FinalApproach:
     seen. A tool pointing along its path sweeps only the path. A KR16 tool tilted across an
     upright plate beside the goal swept its back over the plate's edge, so the path was
     refused again and again and the run timed out (docs/acting.md)."""
-    give_way: bool = False
+    give_way: bool = True
     """Once a veto (the arm's rule, the shield) has held one of its steps and every shorter
     share of it, leave the goal to the policy until the next goal. The straight path is
     tested against the tool alone: into a shelf's compartment it can lead the wrist onto a
     board, where the arm's rule holds the arm, step after step, until the budget runs out,
-    although the policy alone would have reached the goal (docs/acting.md). Off by default."""
+    although the policy alone would have reached the goal (docs/acting.md)."""
 
     def __post_init__(self) -> None:
         for name in ("radius", "axial_radius", "axial_angle", "ee_step", "rot_step", "stall_gain"):

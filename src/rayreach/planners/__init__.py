@@ -9,7 +9,7 @@ from __future__ import annotations
 from dataclasses import replace
 from pathlib import Path
 
-from rayreach.acting.config import LAYERS, ActingConfig
+from rayreach.acting.config import ActingConfig
 from rayreach.planners.base import GlobalPlanner, ReactivePlanner, SamplingPlanner
 from rayreach.planners.ncrrt import NCRRTConfig, ncrrt
 from rayreach.planners.ompl_peer import OMPLConfig, ompl_available, ompl_plan
@@ -18,9 +18,10 @@ from rayreach.planners.rrt import RRTConfig, birrt, rrt
 from rayreach.planners.smoothing import ShortcutConfig
 
 SAMPLING_PLANNERS = ("rrt", "birrt", "ncrrt", "ompl-rrt", "ompl-rrtconnect")
-DRL_PLANNERS = ("drl", "drl-alone", *(f"drl-no-{layer}" for layer in LAYERS))
-"""``drl``: the policy with every acting layer (``rayreach.acting``); ``drl-alone``: with
-none, as the paper's agent acted; ``drl-no-LAYER``: every layer but one (the ablation)."""
+DRL_PLANNERS = ("drl", "drl-alone", *(f"drl-no-{layer}" for layer in ActingConfig().layers))
+"""``drl``: the policy with the shipped acting layers (``rayreach.acting``); ``drl-alone``:
+with none, as the paper's agent acted; ``drl-no-LAYER``: every shipped layer but one (the
+ablation; the slide, an option, is off in the stack already)."""
 PLANNER_NAMES = (*DRL_PLANNERS, *SAMPLING_PLANNERS)
 
 
@@ -30,7 +31,7 @@ def drl_acting(name: str) -> ActingConfig:
         return ActingConfig()
     if name == "drl-alone":
         return ActingConfig.off()
-    if name.startswith("drl-no-") and name[len("drl-no-"):] in LAYERS:
+    if name in DRL_PLANNERS and name.startswith("drl-no-"):
         return ActingConfig().without(name[len("drl-no-"):])
     raise ValueError(f"unknown DRL planner '{name}'; valid: {', '.join(DRL_PLANNERS)}")
 
