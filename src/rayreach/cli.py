@@ -59,7 +59,7 @@ def build_parser() -> argparse.ArgumentParser:
     from rayreach.learning.distill import DistillConfig  # numpy only
     from rayreach.acting.detour import Detour  # numpy only
     from rayreach.acting.final_approach import FinalApproach  # numpy only
-    from rayreach.acting.shield import ACTING_SAFETY  # numpy only
+    from rayreach.acting.shield import ACTING_SAFETY, SLIDE  # numpy only
     from rayreach.scenarios.splits import EVALUATION_SPLITS  # no imports
 
     parser = argparse.ArgumentParser(prog="rayreach", description=__doc__)
@@ -321,7 +321,7 @@ def build_parser() -> argparse.ArgumentParser:
                       help="no motion towards what a ray sees nearer than this, m")
     roll.add_argument("--slide", type=float, default=ACTING_SAFETY.slide,
                       help="step towards the goal when the shield leaves less than this share of the policy's step "
-                           "(default 0: off; 0.1 is the slide as it was measured)")
+                           f"(default 0: off; {SLIDE:g} is the slide as it was measured)")
     roll.add_argument("--memory-steps", type=int, default=ACTING_SAFETY.memory_steps,
                       help="the shield also holds off what the rays saw near in this many last steps")
     roll.add_argument("--arm-clearance", type=float, default=ACTING_SAFETY.arm_clearance,
