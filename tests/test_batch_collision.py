@@ -80,6 +80,34 @@ def test_collision_worlds_answer_as_scene_in_collision(sample):
         worlds.close()
 
 
+@pytest.mark.parametrize("robot", ["ur5", "kr16"])
+def test_a_margin_counts_what_comes_nearer_than_it_as_a_collision(robot):
+    """A ball a few millimetres from the tool: no contact, but within a margin larger than
+    its distance (PyBullet's ``getClosestPoints``, through ``Scene.clearance``) it is hit, in
+    the scene and in the batched worlds, with and without the broad phase."""
+    spec = get_robot(robot)
+    q = np.asarray(spec.home)
+    kin = Kinematics(spec)
+    ee = kin.fk(q)
+    box = ObstacleSpec("sphere", tuple(ee[:3, 3] + 0.06 * ee[:3, 2]), radius=0.05)  # ahead of the tool's tip
+    scene = Scene(spec)
+    worlds = CollisionWorlds(spec, 1)
+    try:
+        scene.set_obstacles([box])
+        scene.set_joints(q)
+        worlds.set_world(0, [box])
+        gap = scene.clearance(0.1)
+        assert 0.002 < gap < 0.05
+        for margin in (0.0, gap - 0.001, gap + 0.001, 0.05):
+            hit = margin > gap
+            assert scene.in_collision(margin) == hit, margin
+            assert worlds.in_collision(0, q, 0.0, margin=margin) == hit, margin
+            assert worlds.in_collision(0, q, 0.0, kin.frames(q), margin) == hit, margin
+    finally:
+        scene.close()
+        worlds.close()
+
+
 def test_set_world_replaces_a_worlds_obstacles_and_moves_them_in_time(monkeypatch):
     spec = get_robot("ur5")
     monkeypatch.setattr(batch_collision, "SHAPES_PER_CLIENT", 3)  # a fresh client every few worlds

@@ -196,6 +196,13 @@ def test_broad_worlds_step_as_reach_env_does():
     assert sum(outcomes.values()) >= 8
 
 
+def test_a_collision_margin_steps_as_reach_env_does():
+    """Training's margin (``EnvConfig.collision_margin``): both envs end the same episodes as
+    collisions, the broad phase looking that much further."""
+    outcomes = _compare("ur5", "random", 6, 16, max_steps=80, goal_tolerance=0.1, collision_margin=0.03)
+    assert outcomes.get("collision", 0) >= 3
+
+
 @pytest.mark.parametrize("robot, scenario", [("kr16", "random"), ("ur10", "random"), (None, "exp2")])
 def test_progress_round_the_obstacles_steps_as_reach_env_does(robot, scenario):
     """The progress term measured along the goal field (``goal_field``): both envs build the

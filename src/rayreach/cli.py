@@ -189,6 +189,9 @@ def build_parser() -> argparse.ArgumentParser:
                             "rollout, kept beside PPO (default: 0, none; also changes a resumed run)")
     train.add_argument("--collision-weight", type=float, default=None,
                        help="reward of a collision (the paper's -10; also changes a resumed run)")
+    train.add_argument("--collision-margin", type=float, default=None, metavar="M",
+                       help="distance, m, within which an obstacle counts as hit in training (default 0: touching "
+                            "it; also changes a resumed run)")
     train.add_argument("--progress-weight", type=float, default=None,
                        help="weight of the progress reward term (0: the paper's reward alone; also changes a resumed run)")
     train.add_argument("--proximity-weight", type=float, default=None,
@@ -692,7 +695,7 @@ def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
     if rays:
         config = replace(config, observation=replace(config.observation, **rays))
     overrides: dict = {}
-    for name in ("collision_weight", "progress_weight", "proximity_weight", "shield_weight",
+    for name in ("collision_weight", "collision_margin", "progress_weight", "proximity_weight", "shield_weight",
                  "progress_around_obstacles", "validate_every", "validate_worlds"):
         if getattr(args, name) is not None:
             overrides[name] = getattr(args, name)

@@ -50,7 +50,7 @@ from rayreach.scenarios import RANDOM, Scenario
 from rayreach.scenarios.feasibility import solve_start, validate
 from rayreach.scenarios.suites import suite_workspace, world_sampler
 from rayreach.sim.batch_clearance import PER_SPHERE, SPEED_SCALE, clearance
-from rayreach.sim.batch_collision import CollisionWorlds, candidates
+from rayreach.sim.batch_collision import MARGIN, CollisionWorlds, candidates
 from rayreach.sim.batch_kinematics import solve_steps
 from rayreach.sim.batch_obstacles import ObstacleBatch
 from rayreach.sim.batch_rays import RayArrays, cast_given, cast_worlds, place_rays
@@ -277,10 +277,11 @@ class BatchedReachEnv(VecEnv):
             self.obstacles.at_time(self.time)
         clock.lap("obstacles")
         collided = np.zeros(self.num_envs, dtype=bool)
-        near = np.flatnonzero(candidates(self.frames, self.spheres, self.obstacles))
+        near = np.flatnonzero(candidates(self.frames, self.spheres, self.obstacles, MARGIN + cfg.collision_margin))
         clock.lap("collision_spheres")
         for i in near:
-            collided[i] = self.collision.in_collision(int(i), self.q[i], float(self.time[i]), self.frames[i])
+            collided[i] = self.collision.in_collision(int(i), self.q[i], float(self.time[i]), self.frames[i],
+                                                      cfg.collision_margin)
         clock.lap("collision_bullet")
         outside = ~((self.ee_pos >= self.ws_low) & (self.ee_pos <= self.ws_high)).all(axis=1)
         distance = _distances(self.goals[self._all, self.goal_index] - self.ee_pos)

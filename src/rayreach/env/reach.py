@@ -107,6 +107,10 @@ class EnvConfig:
     observation: ObservationConfig = ObservationConfig()
     """Parts of the observation beyond the paper's 142 values (``rayreach.env.observation``;
     the default: none, the paper's observation)."""
+    collision_margin: float = 0.0
+    """Distance, m, within which the robot coming to an obstacle counts as a collision (not in
+    the paper; training only): 0, a penetration. A margin makes grazing a moving plate fail
+    in training as touching it does, where it would have passed a few millimetres before."""
 
     def __post_init__(self) -> None:
         if not self.goal_tolerance > 0:
@@ -117,6 +121,8 @@ class EnvConfig:
             raise ValueError(f"max_steps must be >= 1, got {self.max_steps}")
         if not self.control_period > 0:
             raise ValueError(f"control_period must be positive, got {self.control_period}")
+        if not 0.0 <= self.collision_margin < 0.1:
+            raise ValueError(f"collision_margin must be in [0, 0.1) m, got {self.collision_margin}")
 
 
 
@@ -332,7 +338,7 @@ class ReachEnv(gym.Env):
         if self.scene.has_moving_obstacles:
             self.scene.set_time(self.time)
         self.scene.set_joints(self.q)
-        collided = self.scene.in_collision()
+        collided = self.scene.in_collision(cfg.collision_margin)
         outside = not self.scenario.in_workspace(self.ee_pos)  # type: ignore[union-attr]
 
         goal = self.goals[self.goal_index]

@@ -124,6 +124,9 @@ class TrainConfig:
     """Running normalisation of observations and rewards (VecNormalize); not in the paper."""
     collision_weight: float = -10.0
     """r_c, the reward of a collision (the paper's -10, the same as leaving the workspace)."""
+    collision_margin: float = 0.0
+    """Distance, m, within which coming to an obstacle ends a training episode as a collision
+    (``EnvConfig.collision_margin``; not in the paper); 0: a penetration, as in evaluation."""
     progress_weight: float = 10.0
     """Weight of the progress term d_{t-1} - d_t; 0 is the paper's reward alone."""
     progress_around_obstacles: bool = False
@@ -234,6 +237,10 @@ class TrainConfig:
             from rayreach.scenarios.random_world import RandomWorldConfig
 
             RandomWorldConfig(cover_speed=self.cover_speed)  # checks the bounds
+        if self.collision_margin:
+            from rayreach.env.reach import EnvConfig
+
+            EnvConfig(collision_margin=self.collision_margin)  # checks the bounds
         if self.lr_schedule not in LR_SCHEDULES:
             raise ValueError(f"lr_schedule must be one of {', '.join(LR_SCHEDULES)}; "
                              f"got {self.lr_schedule!r}")
@@ -343,6 +350,7 @@ def env_config(config: TrainConfig):
         random_world=RandomWorldConfig(n_obstacles=config.obstacles.start, kinds=training_kinds(config),
                                        cover_speed=config.cover_speed),
         observation=config.observation,
+        collision_margin=config.collision_margin,
     )
 
 

@@ -317,12 +317,12 @@ class CollisionWorlds:
         self._made = sum(len(w.shapes) for w in self._worlds)
 
     def in_collision(self, world: int, q: Sequence[float], time: float,
-                     frames: np.ndarray | None = None) -> bool:
-        """``Scene.in_collision`` of world ``world`` alone with the robot at joints ``q`` and
-        its moving obstacles where they are at ``time``, s. With ``frames``, the DH frames
+                     frames: np.ndarray | None = None, margin: float = 0.0) -> bool:
+        """``Scene.in_collision(margin)`` of world ``world`` alone with the robot at joints ``q``
+        and its moving obstacles where they are at ``time``, s. With ``frames``, the DH frames
         of ``q`` (7, 4, 4), a link is asked about an obstacle only if its spheres come within
-        ``MARGIN`` of it (else it cannot touch it, as for ``candidates``); without, every
-        link is."""
+        ``MARGIN + margin`` of it (else it cannot come within ``margin``, as for
+        ``candidates``); without, every link is."""
         cid, robot = self._scene.client, self._scene.robot
         w = self._worlds[world]
         self._scene.set_joints(q)
@@ -333,13 +333,13 @@ class CollisionWorlds:
         else:
             a = self.spheres
             _near(frames, a.frame, a.centre, a.radius, a.start, self._bound_frame, a.bound_centre,
-                  a.bound_radius, w.sphere, w.pos, w.rot, w.size, MARGIN, w.near)
+                  a.bound_radius, w.sphere, w.pos, w.rot, w.size, MARGIN + margin, w.near)
             pairs = [(k, self._links[j]) for k, j in zip(*np.nonzero(w.near))]
         for k, link in pairs:
-            close = p.getClosestPoints(robot, -1, 0.0, linkIndexA=link, collisionShapeB=w.shapes[k],
+            close = p.getClosestPoints(robot, -1, margin, linkIndexA=link, collisionShapeB=w.shapes[k],
                                        collisionShapePositionB=w.pos[k].tolist(),
                                        collisionShapeOrientationB=w.orientation[k], physicsClientId=cid)
-            if any(c[8] < 0.0 for c in close):
+            if any(c[8] < margin for c in close):
                 return True
         return False
 

@@ -236,8 +236,11 @@ class Scene:
         p.performCollisionDetection(physicsClientId=cid)
         return [c[2] for c in p.getContactPoints(bodyA=self.robot, physicsClientId=cid) if c[8] < 0.0]
 
-    def in_collision(self) -> bool:
-        """Whether the robot (arm or tool) penetrates any obstacle in its current state."""
+    def in_collision(self, margin: float = 0.0) -> bool:
+        """Whether the robot (arm or tool) penetrates any obstacle in its current state; with
+        ``margin``, m, whether it comes nearer than that to one."""
+        if margin > 0.0:
+            return self.clearance(margin) < margin
         return bool(self._penetrating_bodies())
 
     def clearance(self, within: float) -> float:
