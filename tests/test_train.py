@@ -182,6 +182,8 @@ def test_exported_command_keeps_the_flags_a_resume_keeps():
     assert train_command(covers, "RUN").endswith("--checkpoint-every 250000 --extra-kinds goal_cover,goal_cover [--resume]")
     slow = {**base, "recipe": "default", "cover_speed": [0.03, 0.08]}
     assert train_command(slow, "RUN").endswith("--checkpoint-every 250000 --cover-speed 0.03,0.08 [--resume]")
+    margin = {**base, "recipe": "default", "collision_margin": 0.02}
+    assert train_command(margin, "RUN").endswith("--checkpoint-every 250000 --collision-margin 0.02 [--resume]")
 
 
 # ---------------------------------------------------------------------- recipes and the batched path
@@ -462,6 +464,21 @@ def test_a_cover_speed_reaches_the_training_worlds_and_survives_a_resume():
     assert config_from_meta(meta) == config
     with pytest.raises(ValueError, match=r"cover_speed must be \(low, high\).*got \(0.2, 0.1\)"):
         recipe("default", cover_speed=(0.2, 0.1))
+
+
+def test_a_collision_margin_reaches_the_training_worlds_and_survives_a_resume():
+    from rayreach.learning.train import env_config
+
+    config = recipe("default", robot="ur5", collision_margin=0.02)
+    assert env_config(config).collision_margin == 0.02
+    assert env_config(recipe("default", robot="ur5")).collision_margin == 0.0  # evaluation's: touching
+    state = TrainState(AugmentedGoalSize(), ObstacleCurriculum())
+    meta = json.loads(json.dumps(bundle_meta(config, state, 0, "checkpoint", 142)))
+    assert config_from_meta(meta) == config
+    del meta["config"]["collision_margin"]  # a run saved before the margin
+    assert config_from_meta(meta).collision_margin == 0.0
+    with pytest.raises(ValueError, match=r"collision_margin must be in \[0, 0.1\) m, got -0.01"):
+        recipe("default", collision_margin=-0.01)
 
 
 def test_an_obstacle_mix_puts_the_worlds_at_one_to_n_obstacles(tmp_path, monkeypatch, capsys):

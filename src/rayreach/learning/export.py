@@ -49,6 +49,8 @@ def train_command(config: dict, out: str | Path) -> str:
         command += f" --extra-kinds {','.join(config['extra_kinds'])}"
     if config.get("cover_speed"):
         command += f" --cover-speed {','.join(f'{v:g}' for v in config['cover_speed'])}"
+    if config.get("collision_margin"):
+        command += f" --collision-margin {config['collision_margin']:g}"
     every = config.get("validate_every")  # None: saved before runs validated (validating changes no weights)
     if every is not None and usual is not None and every != usual.validate_every:
         command += f" --validate-every {every}"
