@@ -11,7 +11,7 @@ import numpy as np
 from rayreach.acting import ActingConfig, ActingEnv
 from rayreach.acting.detour import Detour
 from rayreach.acting.final_approach import FinalApproach
-from rayreach.acting.shield import SafetyLayer
+from rayreach.acting.shield import ACTING_SAFETY, SLIDE, SafetyLayer
 from rayreach.env.reach import ReachEnv
 from rayreach.scenarios import get_scenario
 from rayreach.scenarios.schema import ObstacleSpec
@@ -29,6 +29,12 @@ def exp1_around_the_tool(obstacles: Sequence[Callable[[np.ndarray], ObstacleSpec
     goals = scenario.goals if goal_offset is None else (tuple(ee + goal_offset),)
     scenario = dataclasses.replace(scenario, goals=goals, obstacles=tuple(make(ee) for make in obstacles))
     return ReachEnv(robot="ur5", scenario=scenario, **env_options)
+
+
+SLIDING = dataclasses.replace(ACTING_SAFETY, slide=SLIDE)
+"""The shipped safety layer with the slide asked for (an option, off in the shipped stack)."""
+SLIDING_STACK = ActingConfig(safety=SLIDING)
+"""The shipped stack with the slide: every layer of ``rayreach.acting.LAYERS`` on."""
 
 
 def layers(final_approach: FinalApproach | None = None, safety: SafetyLayer = SafetyLayer(),

@@ -2,14 +2,14 @@
 
 from __future__ import annotations
 
-import dataclasses
 import subprocess
 import sys
 
 import pytest
 
+from exp1_scenes import SLIDING_STACK
 from rayreach.acting import LAYERS, ActingConfig
-from rayreach.acting.shield import ACTING_SAFETY, SLIDE
+from rayreach.acting.shield import SLIDE
 from rayreach.cli import acting_from_args, build_parser
 from rayreach.planners import DRL_PLANNERS, drl_acting
 
@@ -39,12 +39,11 @@ SHIPPED = tuple(name for name in LAYERS if name != "slide")
 
 def test_each_layer_switches_off_by_name_and_only_that_layer():
     assert ActingConfig().layers == SHIPPED
-    sliding = dataclasses.replace(ActingConfig(), safety=dataclasses.replace(ACTING_SAFETY, slide=SLIDE))
-    assert sliding.layers == LAYERS  # the slide, asked for, is a layer like the others
+    assert SLIDING_STACK.layers == LAYERS  # the slide, asked for, is a layer like the others
     for layer in LAYERS:
-        assert sliding.without(layer).layers == tuple(name for name in LAYERS if name != layer)
+        assert SLIDING_STACK.without(layer).layers == tuple(name for name in LAYERS if name != layer)
         assert ActingConfig().without(layer).layers == tuple(name for name in SHIPPED if name != layer)
-    assert ActingConfig.off().layers == () and sliding.without(*LAYERS).layers == ()
+    assert ActingConfig.off().layers == () and SLIDING_STACK.without(*LAYERS).layers == ()
     assert ActingConfig.training().layers == ("ray_shield", "workspace_guard", "arm_guard")
     with pytest.raises(ValueError, match=r"unknown acting layer\(s\) \['shield'\]; known: final_approach, ray_shield"):
         ActingConfig().without("shield")

@@ -10,11 +10,11 @@ import numpy as np
 import pybullet as p
 import pytest
 
-from exp1_scenes import acting_around_the_tool, exp1_around_the_tool, layers
+from exp1_scenes import SLIDING_STACK, acting_around_the_tool, exp1_around_the_tool, layers
 from rayreach.acting import SOURCES, ActingConfig, ActingEnv
 from rayreach.acting.config import ROBOT_RADII
 from rayreach.acting.final_approach import FinalApproach
-from rayreach.acting.shield import ACTING_SAFETY, SLIDE
+from rayreach.acting.shield import ACTING_SAFETY
 from rayreach.env.reach import N_ROBOT_OBS, ReachEnv
 from rayreach.learning.train import TrainConfig, make_env_fn, set_trainable
 from rayreach.robots import get_robot
@@ -473,8 +473,7 @@ def test_training_layers_never_replace_the_policys_action(scene, goal_offset, pu
     """Where the shipped stack's final approach takes over and where the slide (an option)
     does, ``ActingConfig.training()`` leaves every step the policy's, or held."""
     action = np.r_[push, 0.0, 0.0, 0.0].astype(np.float32)
-    stack = dataclasses.replace(ActingConfig(), safety=dataclasses.replace(ACTING_SAFETY, slide=SLIDE))
-    for config, kept in ((stack.without("resample"), False), (ActingConfig.training(), True)):
+    for config, kept in ((SLIDING_STACK.without("resample"), False), (ActingConfig.training(), True)):
         env = acting_around_the_tool(scene, config, np.array(goal_offset))
         try:
             env.reset(seed=0)

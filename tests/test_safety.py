@@ -8,7 +8,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from exp1_scenes import acting_around_the_tool, layers
+from exp1_scenes import SLIDING, SLIDING_STACK, acting_around_the_tool, layers
 from rayreach.acting import ActingConfig, ActingEnv
 from rayreach.acting.memory import RayMemory
 from rayreach.acting.shield import (ACTING_SAFETY, LOST, MARGIN, SLIDE, SafetyLayer, nearest_direction_in_cone,
@@ -22,8 +22,6 @@ FAR = np.full(3, 0.4)
 X, Y, Z = np.eye(3)
 LOW, HIGH = np.array([-0.4, 0.3, 0.2]), np.array([0.4, 0.7, 0.5])
 INSIDE = np.array([0.0, 0.5, 0.35])
-
-SLIDING = dataclasses.replace(ACTING_SAFETY, slide=SLIDE)  # the shipped stack with the slide, an option
 
 
 def test_shield_drops_only_the_motion_towards_what_a_near_ray_sees():
@@ -471,8 +469,7 @@ def test_a_plate_in_front_of_the_tool_holds_the_push_and_the_slide_takes_over():
     assert 1 <= first < 8 and np.all(moved[:first] > 0.004) and np.all(moved[first:] < 1e-6)
     assert all(a["source"] in ("policy", "held") and a["proposed"] == "policy" for a in acting)
     assert all(a["held_by"] == "shield" for a in acting if a["held"])  # the push cut to nothing
-    sliding = dataclasses.replace(ActingConfig(), safety=SLIDING)
-    steps, info = _push_into_a_box(sliding.without("final_approach", "detour", "arm_guard", "resample"))
+    steps, info = _push_into_a_box(SLIDING_STACK.without("final_approach", "detour", "arm_guard", "resample"))
     acting = info["steps_acting"]
     assert steps == 60 and not info["collision"]
     slid = [a for a in acting if a["source"] == "slide"]
