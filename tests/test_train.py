@@ -526,3 +526,34 @@ def test_the_obstacle_curriculum_flag_undoes_the_broad_recipes_mix(tmp_path, mon
     assert main(["train", "--robot", "ur5", "--obstacle-curriculum", "--obstacle-mix", "2",
                  "--out", str(tmp_path / "x")]) == 2
     assert "--obstacle-mix and --obstacle-curriculum" in capsys.readouterr().err
+
+
+def test_a_resumed_part_steps_another_number_of_worlds_through_the_acting_layers(tmp_path):
+    """A run of the default recipe's batched worlds may go on through the acting layers, which
+    step one ``ReachEnv`` per world and take 64 at most: the resumed part takes the new count,
+    sizes its rollout and minibatch by it, and its command names both."""
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    from rayreach.learning.train import train
+
+    seen = []
+
+    class Rollouts(BaseCallback):
+        def _on_rollout_end(self) -> None:
+            seen.append((self.model.n_envs, self.model.rollout_buffer.n_envs, self.model.batch_size))
+
+        def _on_step(self) -> bool:
+            return True
+
+    out = tmp_path / "run"
+    train(_small_default(timesteps=256), out, callbacks=[Rollouts()])
+    assert seen[-1] == (4, 4, 256)
+    with pytest.raises(ValueError, match="give it 64 or fewer"):
+        train(_small_default(timesteps=512), out, resume=True, resume_overrides={"envs": 65, "acting_layers": True})
+    train(_small_default(timesteps=512), out, resume=True, resume_overrides={"envs": 2, "acting_layers": True},
+          callbacks=[Rollouts()])
+    assert seen[-1] == (2, 2, 128)  # 2 worlds x 64 steps: one minibatch of the whole rollout
+    meta, _ = read_bundle_meta(out / "model.zip")
+    assert (meta["config"]["envs"], meta["config"]["batch_size"], meta["config"]["acting_layers"]) == (2, 128, True)
+    assert meta["timesteps"] >= 512
+    assert " --envs 2 " in train_command(meta["config"], "RUN") + " "

@@ -154,7 +154,7 @@ def build_parser() -> argparse.ArgumentParser:
                             "epochs, lr 3e-4; paper: the paper's agent as published (a resumed run keeps its own)")
     train.add_argument("--envs", type=int, default=None,
                        help="worlds stepped in parallel (default: the recipe's, 256 or 32; the minibatch stays the "
-                            "recipe's unless a rollout is smaller)")
+                            "recipe's unless a rollout is smaller; also changes a resumed run)")
     train.add_argument("--workers", type=int, default=None,
                        help="cores to use: worker processes of per-environment stepping and the update's threads "
                             "(default: CPU cores)")
@@ -694,7 +694,7 @@ def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
         rays["privileged"] = True
     if rays:
         config = replace(config, observation=replace(config.observation, **rays))
-    overrides: dict = {}
+    overrides: dict = {"envs": args.envs} if args.envs is not None else {}
     for name in ("collision_weight", "collision_margin", "progress_weight", "proximity_weight", "shield_weight",
                  "progress_around_obstacles", "validate_every", "validate_worlds"):
         if getattr(args, name) is not None:

@@ -854,7 +854,10 @@ def _train(config: TrainConfig, out: Path, resume: bool, command: str, resume_ov
         saved = config_from_meta(meta)
         if saved.robot != config.robot:
             raise CheckpointError(f"{checkpoint} trains robot '{saved.robot}', not '{config.robot}'")
-        config = replace(saved, timesteps=config.timesteps, workers=config.workers, **(resume_overrides or {}))
+        overrides = dict(resume_overrides or {})
+        if "envs" in overrides:  # e.g. to play a run on through the acting layers, 64 worlds at most
+            overrides["batch_size"] = with_envs(saved, overrides["envs"]).batch_size
+        config = replace(saved, timesteps=config.timesteps, workers=config.workers, **overrides)
         state = TrainState.from_dict(meta["state"])
         if "learning_rate" in (resume_overrides or {}):
             state.learning_rate = None
@@ -876,7 +879,8 @@ def _train(config: TrainConfig, out: Path, resume: bool, command: str, resume_ov
     try:
         tensorboard_dir = str(out / "tensorboard") if _has_tensorboard() else None
         if resume:
-            model = PPO.load(str(checkpoint), env=venv, device=config.device, tensorboard_log=tensorboard_dir)
+            model = PPO.load(str(checkpoint), env=venv, device=config.device, tensorboard_log=tensorboard_dir,
+                             batch_size=config.batch_size)  # SB3 sizes the rollout by the new world count itself
             set_learning_rate(model, config.learning_rate)
             set_discount(model, config.gamma)
             if norm is not None:
