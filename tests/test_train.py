@@ -557,3 +557,10 @@ def test_a_resumed_part_steps_another_number_of_worlds_through_the_acting_layers
     assert (meta["config"]["envs"], meta["config"]["batch_size"], meta["config"]["acting_layers"]) == (2, 128, True)
     assert meta["timesteps"] >= 512
     assert " --envs 2 " in train_command(meta["config"], "RUN") + " "
+    from rayreach.cli import main
+
+    # a later part needs no --envs again: the run's own 2 worlds, not the recipe's 256, meet the layers' bound
+    assert main(["train", "--robot", "ur5", "--out", str(out), "--resume", "--acting-layers", "--timesteps", "640",
+                 "--workers", "1"]) == 0
+    meta, _ = read_bundle_meta(out / "model.zip")
+    assert (meta["config"]["envs"], meta["timesteps"]) == (2, 640)

@@ -664,15 +664,16 @@ def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
 
     robot = get_robot(args.robot).name
     out = args.out or f"runs/{robot}-{args.recipe}"
-    suite = args.suite
-    if suite is None and args.resume and (Path(out) / CHECKPOINT).exists():  # its defaults are the run's suite's
-        suite = read_bundle_meta(Path(out) / CHECKPOINT)[0].get("config", {}).get("suite")
+    saved = (read_bundle_meta(Path(out) / CHECKPOINT)[0].get("config", {})
+             if args.resume and (Path(out) / CHECKPOINT).exists() else {})
+    suite = args.suite or saved.get("suite")  # a resumed run's defaults are its suite's
     config = recipe(args.recipe, robot=robot, seed=args.seed, checkpoint_every=args.checkpoint_every,
                     **({} if suite is None else {"suite": suite}))
     if args.timesteps is not None:
         config = replace(config, timesteps=args.timesteps)
-    if args.envs is not None:
-        config = with_envs(config, args.envs)
+    envs = args.envs if args.envs is not None else saved.get("envs")  # a resumed run's own count: the checks below see it
+    if envs is not None:
+        config = with_envs(config, envs)
     if args.workers is not None:
         config = replace(config, workers=args.workers)
     if args.target_kl is not None:
