@@ -102,9 +102,10 @@ def test_resume_takes_new_reward_weights_and_refuses_another_robot(tmp_path):
     assert first.returncode == 0, first.stderr[-2000:]
     # nothing left to train: still a model, with the weights given to this part
     again = _run(*_train_args(out, 1024), "--resume", "--proximity-weight", "-0.05", "--shield-weight", "-0.1",
-                 "--collision-weight", "-20")
+                 "--collision-weight", "-20", "--checkpoint-every", "512")
     assert again.returncode == 0, again.stderr[-2000:]
     meta, _ = read_bundle_meta(out / "model.zip")
+    assert meta["config"]["checkpoint_every"] == 512  # given again: a long resumed part is saved as often as asked
     assert (meta["config"]["proximity_weight"], meta["config"]["shield_weight"]) == (-0.05, -0.1)
     assert meta["config"]["collision_weight"] == -20.0
     assert meta["config"]["progress_weight"] == 10.0  # not given: the saved one

@@ -161,7 +161,8 @@ def build_parser() -> argparse.ArgumentParser:
     train.add_argument("--out", default=None, help="run directory (default: runs/ROBOT-RECIPE)")
     train.add_argument("--resume", action="store_true", help="continue the checkpoint in --out")
     train.add_argument("--seed", type=int, default=0)
-    train.add_argument("--checkpoint-every", type=int, default=100_000, help="steps between checkpoints")
+    train.add_argument("--checkpoint-every", type=int, default=None,
+                       help="decisions between checkpoints (default: 100,000; also changes a resumed run)")
     train.add_argument("--validate-every", type=int, default=None, metavar="N",
                        help="decisions between validations of the checkpoint alone on validation worlds, the best "
                             "kept as best.zip (default: the recipe's, 2,500,000; 0: never; a resumed run keeps its "
@@ -667,8 +668,7 @@ def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
     saved = (read_bundle_meta(Path(out) / CHECKPOINT)[0].get("config", {})
              if args.resume and (Path(out) / CHECKPOINT).exists() else {})
     suite = args.suite or saved.get("suite")  # a resumed run's defaults are its suite's
-    config = recipe(args.recipe, robot=robot, seed=args.seed, checkpoint_every=args.checkpoint_every,
-                    **({} if suite is None else {"suite": suite}))
+    config = recipe(args.recipe, robot=robot, seed=args.seed, **({} if suite is None else {"suite": suite}))
     if args.timesteps is not None:
         config = replace(config, timesteps=args.timesteps)
     envs = args.envs if args.envs is not None else saved.get("envs")  # a resumed run's own count: the checks below see it
@@ -696,7 +696,7 @@ def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
     if rays:
         config = replace(config, observation=replace(config.observation, **rays))
     overrides: dict = {"envs": args.envs} if args.envs is not None else {}
-    for name in ("collision_weight", "collision_margin", "progress_weight", "proximity_weight", "shield_weight",
+    for name in ("checkpoint_every", "collision_weight", "collision_margin", "progress_weight", "proximity_weight", "shield_weight",
                  "progress_around_obstacles", "validate_every", "validate_worlds"):
         if getattr(args, name) is not None:
             overrides[name] = getattr(args, name)

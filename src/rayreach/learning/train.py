@@ -210,6 +210,8 @@ class TrainConfig:
             raise ValueError("a privileged observation (a teacher's) is computed by the batched env only: "
                              "vec_env 'batched' without acting layers")
         check_period(self.decision_period)
+        if self.checkpoint_every < 1:
+            raise ValueError(f"checkpoint_every must be >= 1 decision, got {self.checkpoint_every}")
         if self.validate_every < 0 or self.validate_worlds < 1:
             raise ValueError(f"validate_every must be >= 0 (0: never) and validate_worlds >= 1; "
                              f"got {self.validate_every} and {self.validate_worlds}")
