@@ -671,7 +671,7 @@ def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
     config = recipe(args.recipe, robot=robot, seed=args.seed, **({} if suite is None else {"suite": suite}))
     if args.timesteps is not None:
         config = replace(config, timesteps=args.timesteps)
-    envs = args.envs if args.envs is not None else saved.get("envs")  # a resumed run's own count: the checks below see it
+    envs = args.envs if args.envs is not None else saved.get("envs")  # a resumed run's own: the checks see it
     if envs is not None:
         config = with_envs(config, envs)
     if args.workers is not None:
@@ -696,8 +696,8 @@ def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
     if rays:
         config = replace(config, observation=replace(config.observation, **rays))
     overrides: dict = {"envs": args.envs} if args.envs is not None else {}
-    for name in ("checkpoint_every", "collision_weight", "collision_margin", "progress_weight", "proximity_weight", "shield_weight",
-                 "progress_around_obstacles", "validate_every", "validate_worlds"):
+    for name in ("checkpoint_every", "collision_weight", "collision_margin", "progress_weight", "proximity_weight",
+                 "shield_weight", "progress_around_obstacles", "validate_every", "validate_worlds"):
         if getattr(args, name) is not None:
             overrides[name] = getattr(args, name)
     if args.clone_at is not None:
