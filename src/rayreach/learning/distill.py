@@ -36,7 +36,7 @@ CURVE_PNG = "distill.png"
 @dataclass(frozen=True)
 class DistillConfig:
     """One distillation; the defaults took a UR5 teacher's student to its level in minutes
-    (docs/training.md, "A privileged teacher")."""
+    (docs/log/2026-12-07-levers-measured.md, "A privileged teacher")."""
 
     steps: int = 3_000_000
     """Environment steps stepped in all (worlds x steps per world)."""

@@ -2,9 +2,9 @@
 demonstrations a clone recorded in the run (``demos-KIND.npz``).
 
 A clone alone is a starting point PPO may leave. The UR5's wait under a moving cover, cloned
-into its actor, was gone after 5 M decisions of PPO (docs/training.md, "Demonstrations that
-wait for the cover"): going under the cover at once pays often enough. Keeping the
-demonstrations in the objective, as DAPG does (Rajeswaran et al. 2018, "Learning complex
+into its actor, was gone after 5 M decisions of PPO (docs/log/2026-12-07-levers-measured.md,
+"Demonstrations that wait for the cover"): going under the cover at once pays often enough.
+Keeping the demonstrations in the objective, as DAPG does (Rajeswaran et al. 2018, "Learning complex
 dexterous manipulation with deep RL and demonstrations"), holds the actor near the expert
 in the expert's states while PPO shapes the rest. The steps come before a rollout, not
 between rollout and update, so that the rollout's log-probabilities are those of the policy

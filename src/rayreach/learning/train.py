@@ -127,8 +127,8 @@ class TrainConfig:
     collision_margin: float = 0.0
     """Distance, m, within which coming to an obstacle ends a training episode as a collision
     (``EnvConfig.collision_margin``; not in the paper); 0: a penetration, as in evaluation.
-    For the UR5's goal under a cover it bought no success (docs/training.md, "A margin round
-    the obstacles in training")."""
+    For the UR5's goal under a cover it bought no success (docs/log/2026-12-07-levers-measured.md,
+    "A margin round the obstacles in training")."""
     progress_weight: float = 10.0
     """Weight of the progress term d_{t-1} - d_t; 0 is the paper's reward alone."""
     progress_around_obstacles: bool = False

@@ -74,7 +74,8 @@ class RandomWorldConfig:
     """Least distance, m, between the robot at its start and every obstacle at t = 0; 0: the
     start need only be free of collision. The authors' generator kept obstacles 5 cm from the
     start: a start the tool or arm begins beside an obstacle no ray sees is a collision the
-    rays cannot prevent (docs/training.md, "Starts beside an obstacle")."""
+    rays cannot prevent (docs/log/2026-11-random-worlds.md,
+    "Starts beside an obstacle")."""
     max_tries: int = 200
 
     def __post_init__(self) -> None:
