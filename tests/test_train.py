@@ -24,7 +24,7 @@ from rayreach.learning.bundles import CheckpointError, read_bundle_meta
 from rayreach.learning.policy import load_policy
 from rayreach.learning.export import train_command
 from rayreach.learning.train import (ADAPTIVE_LR_BOUNDS, RECIPES, TrainConfig, TrainState, adapted_learning_rate,
-                                     append_curve, bundle_meta, config_from_meta, recipe, with_envs)
+                                     append_curve, bundle_meta, config_from_meta, env_config, recipe, with_envs)
 
 RAYREACH = [sys.executable, "-m", "rayreach.cli"]
 
@@ -102,12 +102,14 @@ def test_resume_takes_new_reward_weights_and_refuses_another_robot(tmp_path):
     assert first.returncode == 0, first.stderr[-2000:]
     # nothing left to train: still a model, with the weights given to this part
     again = _run(*_train_args(out, 1024), "--resume", "--proximity-weight", "-0.05", "--shield-weight", "-0.1",
-                 "--collision-weight", "-20", "--checkpoint-every", "512")
+                 "--collision-weight", "-20", "--out-of-bounds-weight", "-30", "--checkpoint-every", "512")
     assert again.returncode == 0, again.stderr[-2000:]
     meta, _ = read_bundle_meta(out / "model.zip")
     assert meta["config"]["checkpoint_every"] == 512  # given again: a long resumed part is saved as often as asked
     assert (meta["config"]["proximity_weight"], meta["config"]["shield_weight"]) == (-0.05, -0.1)
-    assert meta["config"]["collision_weight"] == -20.0
+    assert (meta["config"]["collision_weight"], meta["config"]["out_of_bounds_weight"]) == (-20.0, -30.0)
+    rewards = env_config(config_from_meta(meta)).rewards
+    assert (rewards.collision, rewards.out_of_bounds) == (-20.0, -30.0)
     assert meta["config"]["progress_weight"] == 10.0  # not given: the saved one
     other = _run("train", "--robot", "kr16", "--timesteps", "2048", "--envs", "2", "--workers", "1",
                  "--out", str(out), "--resume")

@@ -190,6 +190,8 @@ def build_parser() -> argparse.ArgumentParser:
                             "rollout, kept beside PPO (default: 0, none; also changes a resumed run)")
     train.add_argument("--collision-weight", type=float, default=None,
                        help="reward of a collision (the paper's -10; also changes a resumed run)")
+    train.add_argument("--out-of-bounds-weight", type=float, default=None,
+                       help="reward of leaving the workspace (the paper's -10; also changes a resumed run)")
     train.add_argument("--collision-margin", type=float, default=None, metavar="M",
                        help="distance, m, within which an obstacle counts as hit in training (default 0: touching "
                             "it; also changes a resumed run)")
@@ -696,8 +698,8 @@ def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
     if rays:
         config = replace(config, observation=replace(config.observation, **rays))
     overrides: dict = {"envs": args.envs} if args.envs is not None else {}
-    for name in ("checkpoint_every", "collision_weight", "collision_margin", "progress_weight", "proximity_weight",
-                 "shield_weight", "progress_around_obstacles", "validate_every", "validate_worlds"):
+    for name in ("checkpoint_every", "collision_weight", "out_of_bounds_weight", "collision_margin", "progress_weight",
+                 "proximity_weight", "shield_weight", "progress_around_obstacles", "validate_every", "validate_worlds"):
         if getattr(args, name) is not None:
             overrides[name] = getattr(args, name)
     if args.clone_at is not None:

@@ -124,6 +124,9 @@ class TrainConfig:
     """Running normalisation of observations and rewards (VecNormalize); not in the paper."""
     collision_weight: float = -10.0
     """r_c, the reward of a collision (the paper's -10, the same as leaving the workspace)."""
+    out_of_bounds_weight: float = -10.0
+    """r_o, the reward of leaving the workspace (the paper's -10). A heavier collision cost
+    alone makes leaving the workspace the cheaper way out of a tight spot."""
     collision_margin: float = 0.0
     """Distance, m, within which coming to an obstacle ends a training episode as a collision
     (``EnvConfig.collision_margin``; not in the paper); 0: a penetration, as in evaluation.
@@ -348,7 +351,8 @@ def env_config(config: TrainConfig):
         true_goal_share=config.true_goal_share,
         true_goal_tolerance=config.goal.rho_min,
         max_steps=config.max_episode_steps,
-        rewards=replace(RewardWeights(), collision=config.collision_weight, progress=config.progress_weight,
+        rewards=replace(RewardWeights(), collision=config.collision_weight, out_of_bounds=config.out_of_bounds_weight,
+                        progress=config.progress_weight,
                         proximity=config.proximity_weight,
                         shielded=config.shield_weight, progress_around_obstacles=config.progress_around_obstacles),
         random_world=RandomWorldConfig(n_obstacles=config.obstacles.start, kinds=training_kinds(config),
