@@ -187,6 +187,9 @@ def test_exported_command_keeps_the_flags_a_resume_keeps():
     assert train_command(slow, "RUN").endswith("--checkpoint-every 250000 --cover-speed 0.03,0.08 [--resume]")
     margin = {**base, "recipe": "default", "collision_margin": 0.02}
     assert train_command(margin, "RUN").endswith("--checkpoint-every 250000 --collision-margin 0.02 [--resume]")
+    failures = {**base, "recipe": "default", "collision_weight": -40.0, "out_of_bounds_weight": -40.0}
+    assert train_command(failures, "RUN").endswith(
+        "--checkpoint-every 250000 --collision-weight -40 --out-of-bounds-weight -40 [--resume]")
 
 
 # ---------------------------------------------------------------------- recipes and the batched path
