@@ -698,8 +698,9 @@ def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
     if rays:
         config = replace(config, observation=replace(config.observation, **rays))
     overrides: dict = {"envs": args.envs} if args.envs is not None else {}
-    for name in ("checkpoint_every", "collision_weight", "out_of_bounds_weight", "collision_margin", "progress_weight",
-                 "proximity_weight", "shield_weight", "progress_around_obstacles", "validate_every", "validate_worlds"):
+    for name in ("checkpoint_every", "collision_weight", "out_of_bounds_weight", "collision_margin",
+                 "progress_weight", "proximity_weight", "shield_weight", "progress_around_obstacles",
+                 "validate_every", "validate_worlds"):
         if getattr(args, name) is not None:
             overrides[name] = getattr(args, name)
     if args.clone_at is not None:

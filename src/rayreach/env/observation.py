@@ -102,7 +102,8 @@ class ObservationConfig:
     success on UR5 worlds (docs/training.md, "The goal under a cover")."""
     slanted: bool = False
     """Rays beside the paper's 129, slanted along the tool, that meet a thin plate lying across
-    it (docs/log/2026-12-07-levers-measured.md, "Rays slanted along the tool"); read after the tip-back rays."""
+    it (docs/log/2026-12-07-levers-measured.md, "Rays slanted along the tool"); read after the
+    tip-back rays."""
     arm_rays: bool = False
     """Rays beside the paper's 129 in rings round the upper arm and the forearm, which in broad
     worlds hit much of what the tool does not (docs/training.md, "What the arm hits"); read
