@@ -3,12 +3,14 @@ walls, its own motion, and what the rays saw a moment ago.
 
 The paper's observation (``ObservationConfig()``, every part off) tells a policy where the
 goal is and what is within 0.4 m now. Two things it lacks cost most of a memoryless
-policy's failures (docs/training.md): the workspace's bounds, which no ray sees (a third of
-the shipped UR5 policy's failures left the workspace), and what the arm passed a moment ago,
-behind rays that no longer see it (two worlds alike now but unlike a second ago ask for
-unlike actions). ``ObservationConfig.planner()`` adds both, with the goal's direction at any
-distance (the goal offset in metres, normalised by its spread over the workspace, hardly
-changes over the last centimetre).
+policy's failures: the workspace's bounds, which no ray sees (leaving the workspace was the
+first policies' commonest failure alone, docs/log/2026-12-01-policy-alone.md), and what the
+arm passed a moment ago, behind rays that no longer see it (two worlds alike now but unlike
+a second ago ask for unlike actions; without the remembered scans collisions rose from 26 to
+44 % of validation worlds, docs/training.md, "One change at a time").
+``ObservationConfig.planner()`` adds both, with the goal's direction at any distance (the
+goal offset in metres, normalised by its spread over the workspace, hardly changes over the
+last centimetre).
 
 ``Observer`` appends the parts to the paper's values for N worlds at once; ``ReachEnv`` uses
 one with N = 1, ``BatchedReachEnv`` one with N worlds, so both give the same observation.

@@ -256,7 +256,8 @@ class RandomWorlds:
                                 name=f"{kind}_{index}")
         if kind == "goal_cover":
             # A static cover was dropped: one low enough to matter sits where the wrist of a
-            # down-pointing tool must be, unseen by every ray (docs/training.md).
+            # down-pointing tool must be, unseen by every ray (docs/log/2026-11-training-runs.md,
+            # "2026-11-25: what held the UR5 policy back, measured").
             lift = float(rng.uniform(0.04, 0.07))
             direction = float(rng.uniform(0, 2 * math.pi))
             speed = float(rng.uniform(*(self.config.cover_speed or self.config.speed)))
