@@ -190,6 +190,8 @@ def test_exported_command_keeps_the_flags_a_resume_keeps():
     failures = {**base, "recipe": "default", "collision_weight": -40.0, "out_of_bounds_weight": -40.0}
     assert train_command(failures, "RUN").endswith(
         "--checkpoint-every 250000 --collision-weight -40 --out-of-bounds-weight -40 [--resume]")
+    quiet = {**base, "recipe": "default", "action_std_init": 0.5}
+    assert train_command(quiet, "RUN").endswith("--checkpoint-every 250000 --action-std-init 0.5 [--resume]")
 
 
 # ---------------------------------------------------------------------- recipes and the batched path
@@ -416,6 +418,26 @@ def test_train_command_line_sets_the_rays_beyond_the_recipes(tmp_path):
     observation = load_policy(out / "model.zip").observation
     assert observation.slanted and observation.tip_back
     assert observation == replace(recipe("default", robot="kr16").observation, slanted=True, tip_back=True)
+
+
+def test_a_run_starts_with_the_action_noise_asked_for_and_a_resume_keeps_its_own(tmp_path, capsys):
+    """``--action-std-init`` sets the standard deviation of the new policy's action noise;
+    a resumed part keeps the run's learned one and refuses another starting value by name."""
+    import torch
+
+    from rayreach.cli import main
+
+    out = tmp_path / "run"
+    args = ["train", "--robot", "ur5", "--timesteps", "256", "--envs", "4", "--workers", "1", "--out", str(out)]
+    assert main([*args, "--action-std-init", "0.4", "--checkpoint-every", "1000000"]) == 0
+    meta, _ = read_bundle_meta(out / "checkpoint.zip")
+    assert meta["config"]["action_std_init"] == 0.4
+    policy = load_policy(out / "checkpoint.zip").model.policy
+    assert torch.allclose(policy.log_std.exp(), torch.full((6,), 0.4), atol=0.05)  # one update moved it a little
+    assert main([*args, "--timesteps", "512", "--resume", "--action-std-init", "1.0"]) == 2
+    assert "this run started with 0.4" in capsys.readouterr().err
+    with pytest.raises(ValueError, match="must be > 0"):
+        TrainConfig(action_std_init=0.0)
 
 
 def test_a_resumed_part_discounts_its_returns_by_a_new_gamma(tmp_path):

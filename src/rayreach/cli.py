@@ -246,6 +246,9 @@ def build_parser() -> argparse.ArgumentParser:
     train.add_argument("--learning-rate", type=float, default=None,
                        help="Adam step size (default: the recipe's, 1e-3 adapted to the updates' KL, or baseline's "
                             "3e-4, the paper's; also changes a resumed run and restarts its adaptation)")
+    train.add_argument("--action-std-init", type=float, default=None, metavar="STD",
+                       help="the action noise's standard deviation at the start of a run from scratch "
+                            "(default: 1.0; a resumed run keeps its learned noise)")
     train.add_argument("--gamma", type=float, default=None,
                        help="discount per decision, in (0, 1) (default: the recipe's 0.99; also changes a "
                             "resumed run)")
@@ -688,6 +691,12 @@ def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
         config = replace(config, start_decisions=args.start_decisions)
     if args.decision_period is not None:
         config = replace(config, decision_period=args.decision_period)
+    if args.action_std_init is not None:
+        started = saved.get("action_std_init", 1.0)
+        if args.resume and args.action_std_init != started:
+            raise ValueError(f"--action-std-init sets the noise a run starts with; this run started with "
+                             f"{started:g} and keeps its learned noise: give {started:g} or leave it out")
+        config = replace(config, action_std_init=args.action_std_init)
     from rayreach.sim.sensors import EXTRA_RAYS
 
     rays = {name: getattr(args, name) for name in EXTRA_RAYS if getattr(args, name) is not None}

@@ -51,7 +51,7 @@ def train_command(config: dict, out: str | Path) -> str:
         command += f" --cover-speed {','.join(f'{v:g}' for v in config['cover_speed'])}"
     if config.get("collision_margin"):
         command += f" --collision-margin {config['collision_margin']:g}"
-    for field in ("collision_weight", "out_of_bounds_weight"):
+    for field in ("collision_weight", "out_of_bounds_weight", "action_std_init"):
         if usual is not None and config.get(field, getattr(usual, field)) != getattr(usual, field):
             command += f" --{field.replace('_', '-')} {config[field]:g}"
     every = config.get("validate_every")  # None: saved before runs validated (validating changes no weights)

@@ -10,6 +10,7 @@ recipe with the paper's update that trained the shipped policies.
 from __future__ import annotations
 
 import csv
+import math
 import os
 import platform
 import signal
@@ -96,6 +97,9 @@ class TrainConfig:
     desired_kl: float = 0.01
     """The adaptive schedule's target KL per update (rsl_rl's)."""
     clip_range: float = 0.2
+    action_std_init: float = 1.0
+    """Standard deviation of the policy's action noise at the start of a run, each action
+    dimension (SB3's ``log_std_init`` of 0); a resumed run keeps its own, learned."""
     ent_coef: float = 0.0
     """The paper's (rsl_rl: 0.01). Kept: the shipped runs learned with it, and the goal's
     last centimetre wants the action noise to shrink."""
@@ -213,6 +217,8 @@ class TrainConfig:
             raise ValueError("a privileged observation (a teacher's) is computed by the batched env only: "
                              "vec_env 'batched' without acting layers")
         check_period(self.decision_period)
+        if not self.action_std_init > 0:
+            raise ValueError(f"action_std_init must be > 0, got {self.action_std_init}")
         if self.checkpoint_every < 1:
             raise ValueError(f"checkpoint_every must be >= 1 decision, got {self.checkpoint_every}")
         if self.validate_every < 0 or self.validate_worlds < 1:
@@ -457,6 +463,7 @@ def build_model(config: TrainConfig, venv, tensorboard_dir: str | None):
         "features_extractor_kwargs": {"layers": tuple(config.features)},
         "share_features_extractor": config.share_features,
         "net_arch": {"pi": list(config.heads), "vf": list(config.heads)},
+        "log_std_init": math.log(config.action_std_init),
     }
     return PPO(
         "MlpPolicy",
