@@ -666,7 +666,7 @@ def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
     from rayreach.learning.bundles import read_bundle_meta
     from rayreach.learning.selection import BEST
     from rayreach.learning.clone_stage import train_with_clone
-    from rayreach.learning.train import CHECKPOINT, recipe, with_envs
+    from rayreach.learning.train import CHECKPOINT, RECIPES, recipe, with_envs
 
     robot = get_robot(args.robot).name
     out = args.out or f"runs/{robot}-{args.recipe}"
@@ -692,7 +692,7 @@ def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
     if args.decision_period is not None:
         config = replace(config, decision_period=args.decision_period)
     if args.action_std_init is not None:
-        started = saved.get("action_std_init", 1.0)
+        started = saved.get("action_std_init", RECIPES["baseline"].action_std_init)  # config_from_meta's rule
         if args.resume and args.action_std_init != started:
             raise ValueError(f"--action-std-init sets the noise a run starts with; this run started with "
                              f"{started:g} and keeps its learned noise: give {started:g} or leave it out")
