@@ -60,6 +60,7 @@ def test_the_rollout_command_has_one_switch_per_layer():
     assert acting_from_args(parser.parse_args([*base, "--policy-alone"])) == ActingConfig.off()
     tuned = acting_from_args(parser.parse_args([*base, "--ray-shield", "0.08", "--no-slide"]))
     assert tuned.safety.ray_shield == 0.08 and "slide" not in tuned.layers
+    assert acting_from_args(parser.parse_args([*base, "--held-draw-std", "0"])).held_draw_std == 0.0
 
 
 def test_drl_planner_names_are_the_stack_the_policy_alone_and_the_stack_minus_one_layer():

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from rayreach.acting import ActingPolicy
+from rayreach.acting.resample import HELD_DRAW_STD
 from rayreach.env.batched import BatchedReachEnv
 from rayreach.env.decisions import DecisionPeriod, HeldAction, check_period
 from rayreach.env.reach import ReachEnv
@@ -151,8 +152,9 @@ class _CountingPolicy:
         self.calls += 1
         return np.full(6, float(self.calls), dtype=np.float32)
 
-    def sample(self, obs, rng):
+    def sample(self, obs, rng, least_std=0.0):
         self.calls += 1
+        self.least_std = least_std
         return np.full(6, -float(self.calls), dtype=np.float32)
 
 
@@ -166,6 +168,7 @@ def test_the_acting_policy_holds_each_action_for_the_period():
     assert actor.act(np.zeros(4), {})[0] == 4
     # a held arm draws a new action at once, and holds that one
     assert actor.act(np.zeros(4), {"acting": {"held": True}})[0] == -5
+    assert policy.least_std == HELD_DRAW_STD  # drawn at least that wide
     assert actor.act(np.zeros(4), {})[0] == -5
 
 

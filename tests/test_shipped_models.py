@@ -263,6 +263,28 @@ def test_the_acting_policy_draws_only_where_the_arm_was_held_and_repeats_with_it
     np.testing.assert_array_equal(bare.act(obs, held), policy.act(obs, deterministic=True))
 
 
+def test_a_held_draw_is_at_least_as_wide_as_the_floor_and_the_shipped_policies_draw_as_before():
+    """``least_std`` widens only the dimensions whose noise lies below it: against the
+    policy's own mean, the draws of a floor of 1.0 spread at least as a Gaussian of 1.0
+    clipped to [-1, 1] does; the shipped UR5's noise lies above ``HELD_DRAW_STD`` in every
+    dimension, so its held draws repeat those without a floor, draw for draw."""
+    from rayreach.acting.resample import HELD_DRAW_STD
+
+    policy = load_policy(MODELS_DIR / "ur5.zip")
+    obs = _exp1_start_observation()
+    assert np.exp(policy.model.policy.log_std.detach().numpy()).min() > HELD_DRAW_STD
+    plain = [policy.sample(obs, np.random.default_rng(i)) for i in range(50)]
+    floored = [policy.sample(obs, np.random.default_rng(i), HELD_DRAW_STD) for i in range(50)]
+    np.testing.assert_array_equal(np.array(plain), np.array(floored))
+    mean = policy.act(obs, deterministic=True)
+    rng = np.random.default_rng(0)
+    wide = np.array([policy.sample(obs, rng, 3.0) for _ in range(2000)])
+    narrow = np.array([policy.sample(obs, rng) for _ in range(2000)])
+    assert np.all(np.abs(wide) <= 1.0)
+    assert np.all(np.abs(wide - mean).mean(axis=0) > np.abs(narrow - mean).mean(axis=0))
+    assert np.all((np.abs(wide) > 0.999).mean(axis=0) > 0.5)  # a deviation of 3 mostly lands on a bound
+
+
 @pytest.mark.expensive
 @pytest.mark.parametrize("scenario", EXPERIMENTS)
 def test_the_shipped_stack_solves_every_experiment_within_the_papers_path(scenario):

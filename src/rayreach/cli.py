@@ -59,6 +59,7 @@ def build_parser() -> argparse.ArgumentParser:
     from rayreach.learning.distill import DistillConfig  # numpy only
     from rayreach.acting.detour import Detour  # numpy only
     from rayreach.acting.final_approach import FinalApproach  # numpy only
+    from rayreach.acting.resample import HELD_DRAW_STD  # numpy only
     from rayreach.acting.shield import ACTING_SAFETY, SLIDE  # numpy only
     from rayreach.scenarios.splits import EVALUATION_SPLITS  # no imports
 
@@ -340,6 +341,9 @@ def build_parser() -> argparse.ArgumentParser:
                       help="the arm's rule watches the arm's blind links only, not the tool")
     roll.add_argument("--tool-clearance", type=float, default=ACTING_SAFETY.tool_clearance,
                       help="the clearance the arm's rule keeps the tool at, m")
+    roll.add_argument("--held-draw-std", type=float, default=HELD_DRAW_STD,
+                      help="where the arm was held, draw the next action with at least this standard deviation per "
+                           "action dimension (actions lie in [-1, 1]; 0: the policy's own)")
     roll.add_argument("--start-clearance", type=float, default=0.0,
                       help="random worlds: keep the robot's start this far from every obstacle, m (default 0: free of "
                            "collision only; the authors' generator kept 0.05)")
@@ -839,7 +843,7 @@ def acting_from_args(args: argparse.Namespace):
                          arm_rays=args.guard_arm_rays)
     config = ActingConfig(final_approach=FinalApproach(args.final_approach_radius, stall_steps=args.stall_steps,
                                                        turn=not args.no_turn, give_way=not args.no_give_way),
-                          safety=safety, detour=Detour(stall_steps=args.detour_steps))
+                          safety=safety, detour=Detour(stall_steps=args.detour_steps), held_draw_std=args.held_draw_std)
     off = LAYERS if args.policy_alone else [layer for layer in LAYERS if getattr(args, f"no_{layer}")]
     return config.without(*off)
 

@@ -7,6 +7,7 @@ from dataclasses import dataclass, replace
 from rayreach.acting.detour import Detour
 from rayreach.acting.final_approach import FinalApproach
 from rayreach.acting.shield import ACTING_SAFETY, SafetyLayer
+from rayreach.acting.resample import HELD_DRAW_STD
 
 LAYERS = ("final_approach", "ray_shield", "slide", "workspace_guard", "arm_guard", "detour", "resample")
 """Every acting layer, by the name that switches it off (``ActingConfig.without``, ``--no-LAYER``)."""
@@ -46,6 +47,8 @@ class ActingConfig:
     """The way round what the rays saw for a stalled policy (None: off)."""
     resample: bool = True
     """Draw the action from the policy's distribution where the arm was held."""
+    held_draw_std: float = HELD_DRAW_STD
+    """The least standard deviation of that draw, per action dimension (``ActingPolicy``)."""
 
     @classmethod
     def off(cls) -> "ActingConfig":

@@ -52,8 +52,9 @@ def train_command(config: dict, out: str | Path) -> str:
     if config.get("collision_margin"):
         command += f" --collision-margin {config['collision_margin']:g}"
     for field in ("collision_weight", "out_of_bounds_weight", "action_std_init"):
-        if usual is not None and config.get(field, getattr(usual, field)) != getattr(usual, field):
-            command += f" --{field.replace('_', '-')} {config[field]:g}"
+        saved = config.get(field, getattr(RECIPES["baseline"], field))  # config_from_meta's rule
+        if usual is not None and saved != getattr(usual, field):
+            command += f" --{field.replace('_', '-')} {saved:g}"
     every = config.get("validate_every")  # None: saved before runs validated (validating changes no weights)
     if every is not None and usual is not None and every != usual.validate_every:
         command += f" --validate-every {every}"

@@ -186,13 +186,14 @@ class OnnxPolicy:
         action = self.session.run([OUTPUT], {INPUT: batch})[0]
         return action[0] if single else action
 
-    def sample(self, obs: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    def sample(self, obs: np.ndarray, rng: np.random.Generator, least_std: float = 0.0) -> np.ndarray:
         """An action drawn from the policy's Gaussian with ``rng``, clipped to the action
-        space, as ``Policy.sample`` draws it (``ActingPolicy`` draws where the arm was held)."""
+        space, as ``Policy.sample`` draws it (``ActingPolicy`` draws where the arm was held),
+        each dimension's standard deviation at least ``least_std``."""
         obs = np.asarray(obs, dtype=np.float32).reshape(1, -1)
         if obs.shape[1] != self.obs_size:
             raise ValueError(f"{self.path}: expected observations of {self.obs_size} values, got {obs.shape[1]}")
         mean = self.session.run([MEAN], {INPUT: obs})[0][0]
-        std = np.asarray(self.meta["action_std"], dtype=np.float32)
+        std = np.maximum(np.asarray(self.meta["action_std"], dtype=np.float32), np.float32(least_std))
         low, high = (np.asarray(self.meta[k], dtype=np.float32) for k in ("action_low", "action_high"))
         return np.clip(mean + std * rng.standard_normal(mean.shape), low, high).astype(np.float32)

@@ -48,10 +48,10 @@ class Policy:
         action, _ = self.model.predict(self._normalized(obs), deterministic=deterministic)
         return action
 
-    def sample(self, obs: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    def sample(self, obs: np.ndarray, rng: np.random.Generator, least_std: float = 0.0) -> np.ndarray:
         """An action drawn from the policy's Gaussian with ``rng`` (not torch's global
         generator, so that a seeded run repeats), clipped to the action space as
-        ``act`` clips."""
+        ``act`` clips; each dimension's standard deviation at least ``least_std``."""
         import torch
 
         with torch.no_grad():
@@ -59,6 +59,7 @@ class Policy:
             gaussian = self.model.policy.get_distribution(tensor).distribution
             mean, std = gaussian.mean.numpy()[0], gaussian.stddev.numpy()[0]
         space = self.model.action_space
+        std = np.maximum(std, least_std)
         return np.clip(mean + std * rng.standard_normal(mean.shape), space.low, space.high).astype(np.float32)
 
     def _normalized(self, obs: np.ndarray) -> np.ndarray:

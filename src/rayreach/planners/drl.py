@@ -88,7 +88,8 @@ class DRLPlanner(ReactivePlanner):
         self.refuse_unseen = refuse_unseen
         self.unseen_margin = unseen_margin
         self.observation = self.policy.observation
-        self._acting = ActingPolicy(self.policy, deterministic=deterministic, resample=acting.resample)
+        self._acting = ActingPolicy(self.policy, deterministic=deterministic, resample=acting.resample,
+                                     least_std=acting.held_draw_std)
 
     @property
     def robot(self) -> str:
