@@ -265,8 +265,8 @@ def test_the_acting_policy_draws_only_where_the_arm_was_held_and_repeats_with_it
 
 def test_a_held_draw_is_at_least_as_wide_as_the_floor_and_the_shipped_policies_draw_as_before():
     """``least_std`` widens only the dimensions whose noise lies below it: against the
-    policy's own mean, the draws of a floor of 1.0 spread at least as a Gaussian of 1.0
-    clipped to [-1, 1] does; the shipped UR5's noise lies above ``HELD_DRAW_STD`` in every
+    policy's own mean, draws at least 3.0 wide spread farther than the policy's own and
+    land mostly on a bound of [-1, 1]; the shipped UR5's noise lies above ``HELD_DRAW_STD`` in every
     dimension, so its held draws repeat those without a floor, draw for draw."""
     from rayreach.acting.resample import HELD_DRAW_STD
 

@@ -122,8 +122,7 @@ class ArmController:
             capsules = ChainCapsules.shipped(self.kin, guarded_links(self.spec, guard_arm))
         self.components, self.final_approach, _ = acting_components(acting, self.spec, self.ray_range,
                                                                     RewardWeights(), capsules)
-        self.actor = ActingPolicy(self.policy, deterministic=True, resample=acting.resample,
-                                   least_std=acting.held_draw_std)
+        self.actor = ActingPolicy.acting(self.policy, acting)
         self.observer = Observer(self.policy.observation, 1, N_RAYS, OBS_SIZE, self.spec.ee_step)
         self.n_goal_rays = N_GOAL_RAYS * observation.goal_sight
         self.reading_sets = observation.ray_sets + (("arm_rays",) if guard_arm and not observation.arm_rays else ())

@@ -6,8 +6,8 @@ from dataclasses import dataclass, replace
 
 from rayreach.acting.detour import Detour
 from rayreach.acting.final_approach import FinalApproach
-from rayreach.acting.shield import ACTING_SAFETY, SafetyLayer
 from rayreach.acting.resample import HELD_DRAW_STD
+from rayreach.acting.shield import ACTING_SAFETY, SafetyLayer
 
 LAYERS = ("final_approach", "ray_shield", "slide", "workspace_guard", "arm_guard", "detour", "resample")
 """Every acting layer, by the name that switches it off (``ActingConfig.without``, ``--no-LAYER``)."""

@@ -7,6 +7,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 if TYPE_CHECKING:  # acting reads a loaded policy; it does not load one
+    from rayreach.acting.config import ActingConfig
     from rayreach.learning.policy import Policy
 
 
@@ -47,6 +48,12 @@ class ActingPolicy:
         self.period = int(getattr(policy, "decision_period", 1))
         self._action: np.ndarray | None = None
         self._age = 0
+
+    @classmethod
+    def acting(cls, policy: Policy, config: ActingConfig, deterministic: bool = True) -> ActingPolicy:
+        """``policy`` drawing where the arm was held as ``config`` says (``resample``,
+        ``held_draw_std``)."""
+        return cls(policy, deterministic=deterministic, resample=config.resample, least_std=config.held_draw_std)
 
     @property
     def draws_where_held(self) -> bool:

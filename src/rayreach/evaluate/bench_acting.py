@@ -29,7 +29,7 @@ def bench_acting(model: str | Path, episodes: int = 10, n_obstacles: int | None 
     trained = policy.meta.get("state", {}).get("obstacles", {}).get("count", 0)
     base.set_n_obstacles(trained if n_obstacles is None else n_obstacles)
     envs = {name: ActingEnv(base, config) for name, config in VARIANTS.items()}
-    agents = {name: ActingPolicy(policy, resample=config.resample, least_std=config.held_draw_std) for name, config in VARIANTS.items()}
+    agents = {name: ActingPolicy.acting(policy, config) for name, config in VARIANTS.items()}
     seconds, steps = dict.fromkeys(VARIANTS, 0.0), dict.fromkeys(VARIANTS, 0)
     first = get_split(split).start
     try:

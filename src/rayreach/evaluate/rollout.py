@@ -78,8 +78,7 @@ def rollout(
     drawn = scenario in WORLD_SUITES
     first = _first_seed(split, seed, episodes, drawn=drawn)
     policy = load_policy(model)
-    agent = ActingPolicy(policy, deterministic=deterministic, resample=acting.resample,
-                         least_std=acting.held_draw_std)
+    agent = ActingPolicy.acting(policy, acting, deterministic)
     base = ReachEnv(robot=policy.robot, scenario=scenario, goal_tolerance=goal_tolerance,
                     random_world=RandomWorldConfig(start_clearance=start_clearance), observation=policy.observation)
     env = ActingEnv(base, acting)

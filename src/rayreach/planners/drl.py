@@ -88,8 +88,7 @@ class DRLPlanner(ReactivePlanner):
         self.refuse_unseen = refuse_unseen
         self.unseen_margin = unseen_margin
         self.observation = self.policy.observation
-        self._acting = ActingPolicy(self.policy, deterministic=deterministic, resample=acting.resample,
-                                     least_std=acting.held_draw_std)
+        self._acting = ActingPolicy.acting(self.policy, acting, deterministic)
 
     @property
     def robot(self) -> str:
